@@ -1,0 +1,163 @@
+// The port contract: everything the kernel needs from a processor and its
+// host, and nothing more. The kernel includes only this header; each target
+// folder (x86_64/, aarch64/, m68k/) supplies `arch.hpp` (inline pieces) and
+// `switch.S` (the context switch), and posix/ supplies the timer, the clock,
+// the interrupt mask and idle for every target that runs as a Linux process.
+// template/ documents a new port entry by entry.
+//
+// Calling-context suffixes (see docs/architecture.md): none = task context,
+// `_locked` = interrupt mask held, `_from_signal` = async-signal-safe.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "arch.hpp"  // resolved per target by the build: port/<arch>/arch.hpp
+
+namespace chm::port {
+
+// ---------------------------------------------------------------- contexts
+
+// A suspended execution context. The only state kept outside the context's
+// own stack is its stack pointer: a switch pushes the callee-saved registers
+// and FP control state onto the outgoing stack and pops them from the
+// incoming one.
+struct Context {
+    void* sp = nullptr;
+};
+
+// Prepare `ctx` so that the first context_switch() into it calls
+// `entry(arg)` on the stack [stack_lo, stack_lo + size).
+//
+// Pre:  stack_lo is at least 16-byte aligned; size >= kMinStack.
+// Post: ctx->sp points inside the stack; nothing below ctx->sp is touched.
+//       On entry to `entry`, the stack pointer satisfies the ABI's alignment
+//       at a function call (x86-64: rsp+8 ≡ 0 mod 16; aarch64: sp ≡ 0 mod 16;
+//       m68k: sp ≡ 0 mod 4), the FP control state is the ABI default
+//       (round-to-nearest, exceptions masked), and callee-saved registers hold
+//       unspecified values. `entry` must never return: the kernel ends a task
+//       by switching away from it for good.
+void context_init(Context* ctx, void* stack_lo, std::size_t size,
+                  void (*entry)(void*), void* arg);
+
+// Minimum stack a context needs for the switch frame and the entry call.
+inline constexpr std::size_t kMinStack = 1024;
+
+}  // namespace chm::port
+
+extern "C" {
+// Save the running context's callee-saved registers and FP control state on
+// its stack, store its stack pointer in *save_sp, load `load_sp` and resume
+// the context found there (returning from its own call to chm_port_switch,
+// or entering it for the first time).
+//
+// Pre:  `load_sp` was produced by context_init or by an earlier switch out of
+//       that context, and that context is not running. Called in task or
+//       kernel context with the interrupt mask held (the kernel never switches
+//       from a signal handler).
+// Post: returns when some other context switches back to the saved one; all
+//       callee-saved integer and FP registers and the FP control state (x86-64:
+//       MXCSR and x87 control word; aarch64: d8-d15 and FPCR; m68k: d2-d7,
+//       a2-a6, fp2-fp7, FPCR) are as they were at the call.
+void chm_port_switch(void** save_sp, void* load_sp);
+}
+
+namespace chm::port {
+
+inline void context_switch(Context* from, Context* to) {
+    chm_port_switch(&from->sp, to->sp);
+}
+
+// ------------------------------------------------------- test-and-set lock
+
+// Atomically set the byte at `b` and report whether it was clear before:
+// true means the caller now owns it. Full barrier: accesses after a
+// successful tas() do not move before it. Works on memory shared between
+// processes (the backplane) and between threads. Any context.
+//   bool tas(volatile std::uint8_t* b);            -- in arch.hpp
+// Clear a byte set by tas(), with release ordering. Any context.
+//   void tas_clear(volatile std::uint8_t* b);      -- in arch.hpp
+// Tell the processor we are in a spin-wait loop (pause / yield / nop).
+//   void relax();                                  -- in arch.hpp
+
+// ----------------------------------------------------------- the clock
+
+// Monotonic time in nanoseconds since an arbitrary epoch fixed at process
+// start (CLOCK_MONOTONIC). Never goes backwards. Any context, including a
+// signal handler.
+std::uint64_t now_ns();
+
+// ------------------------------------------------------ the interrupt mask
+
+// The cheap interrupt mask. On POSIX it is a per-process nesting count read
+// by the timer signal handler, not a sigprocmask() call: while it is held,
+// the handler only records that the tick is pending, and irq_restore() takes
+// it when the count returns to zero. Task or kernel context.
+struct IrqState {
+    volatile std::uint32_t nest;     // > 0: interrupts masked
+    volatile std::uint32_t pending;  // a tick arrived while masked
+};
+extern IrqState g_irq;
+
+// Called by irq_restore() (with the mask held once more) when a tick arrived
+// while masked. Installed by the kernel with irq_set_pending_hook().
+using PendingHook = void (*)();
+void irq_set_pending_hook(PendingHook hook);
+void irq_take_pending();  // slow path of irq_restore; out of line
+
+inline void irq_disable() {
+    g_irq.nest = g_irq.nest + 1;
+    __atomic_signal_fence(__ATOMIC_SEQ_CST);
+}
+
+inline void irq_restore() {
+    __atomic_signal_fence(__ATOMIC_SEQ_CST);
+    const std::uint32_t n = g_irq.nest - 1;
+    g_irq.nest = n;
+    if (n == 0 && g_irq.pending) [[unlikely]]
+        irq_take_pending();
+}
+
+inline bool irq_masked() { return g_irq.nest != 0; }
+
+// ------------------------------------------------------------- the timer
+
+// The timer handler the port calls, in signal context on the kernel thread's
+// alternate signal stack, with the interrupt mask taken (nest == 1) and the
+// interrupted PC already known to be preemptible. It runs the kernel's timer
+// work and returns true when the interrupted task must give up the CPU.
+using TickHandler = bool (*)(std::uint64_t now);
+
+// Create the one POSIX timer of this process, directed at the calling thread
+// (SIGEV_THREAD_ID), install the signal handler on an alternate signal stack
+// and unblock the signal in the calling thread. Other threads never receive
+// it from the timer; a copy sent to the process that reaches one is ignored.
+// Returns 0 or -errno. Call once, on the kernel thread, before any timer_arm.
+int timer_init(TickHandler handler);
+
+// Arm the one-shot timer for absolute monotonic time `at_ns` (0 disarms).
+// Replaces any earlier setting. Task or kernel context, mask held.
+void timer_arm_locked(std::uint64_t at_ns);
+
+// Tear the timer down (process exit, tests).
+void timer_fini();
+
+// The timer signal number (a real-time signal).
+int timer_signal();
+
+// Number of timer signals that reached a thread other than the kernel thread
+// (they are ignored; a test proves this stays zero).
+std::uint64_t stray_signal_count();
+
+// ------------------------------------------------------------------ idle
+
+// Sleep until the timer fires or wake() is called, using no CPU. Called by
+// the kernel's idle loop with the mask held and nothing ready; returns with
+// the mask held. A wake() or tick that happens between the caller's check and
+// the sleep is not lost.
+void idle_wait_locked();
+
+// Wake an RTPU sleeping in idle_wait_locked(): any thread, signal handler.
+void idle_wake();
+
+}  // namespace chm::port

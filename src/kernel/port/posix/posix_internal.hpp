@@ -1,0 +1,11 @@
+// State shared by the POSIX port's own files, not part of the contract.
+#pragma once
+
+#include <cstdint>
+
+namespace chm::port {
+
+// Bumped by the timer handler and idle_wake(); idle sleeps on it.
+extern std::uint32_t g_wake_seq;
+
+}  // namespace chm::port

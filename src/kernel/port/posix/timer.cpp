@@ -1,0 +1,111 @@
+// The one timer of an RTPU process: a POSIX timer that sends a real-time
+// signal to the kernel thread only (SIGEV_THREAD_ID). Its handler runs on an
+// alternate signal stack, so no signal frame ever lands on a task stack.
+#include "port.hpp"
+#include "posix_internal.hpp"
+
+#include <cerrno>
+#include <csignal>
+#include <cstdlib>
+#include <ctime>
+#include <sys/mman.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+namespace chm::port {
+
+namespace {
+
+timer_t g_timer;
+bool g_timer_live = false;
+TickHandler g_tick = nullptr;
+void* g_altstack = nullptr;
+constexpr std::size_t kAltStackSize = 64 * 1024;
+std::uint64_t g_stray = 0;
+
+// initial-exec: no lazy TLS allocation inside the handler.
+__attribute__((tls_model("initial-exec"))) thread_local bool t_kernel_thread = false;
+
+void on_timer(int, siginfo_t*, void*) {
+    if (!t_kernel_thread) {  // a process-directed copy reached another thread
+        __atomic_fetch_add(&g_stray, 1, __ATOMIC_RELAXED);
+        return;
+    }
+    const int saved_errno = errno;
+    if (g_irq.nest != 0) {
+        g_irq.pending = 1;
+        __atomic_fetch_add(&g_wake_seq, 1, __ATOMIC_RELEASE);
+    } else {
+        g_irq.nest = 1;
+        __atomic_signal_fence(__ATOMIC_SEQ_CST);
+        if (g_tick) g_tick(now_ns());
+        __atomic_signal_fence(__ATOMIC_SEQ_CST);
+        g_irq.nest = 0;
+    }
+    errno = saved_errno;
+}
+
+}  // namespace
+
+int timer_signal() { return SIGRTMIN + 2; }
+
+std::uint64_t stray_signal_count() { return __atomic_load_n(&g_stray, __ATOMIC_RELAXED); }
+
+int timer_init(TickHandler handler) {
+    if (g_timer_live) return -EBUSY;
+    g_tick = handler;
+    const int sig = timer_signal();
+
+    if (!g_altstack) {
+        g_altstack = mmap(nullptr, kAltStackSize, PROT_READ | PROT_WRITE,
+                          MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+        if (g_altstack == MAP_FAILED) { g_altstack = nullptr; return -errno; }
+    }
+    stack_t ss{};
+    ss.ss_sp = g_altstack;
+    ss.ss_size = kAltStackSize;
+    if (sigaltstack(&ss, nullptr) != 0) return -errno;
+
+    struct sigaction sa{};
+    sa.sa_sigaction = on_timer;
+    sa.sa_flags = SA_SIGINFO | SA_ONSTACK | SA_RESTART;
+    sigfillset(&sa.sa_mask);  // nothing nests inside the handler
+    if (sigaction(sig, &sa, nullptr) != 0) return -errno;
+
+    // The timer signals this thread only (SIGEV_THREAD_ID below). A copy
+    // sent to the whole process that lands on another thread is counted and
+    // ignored by the handler.
+    sigset_t set;
+    sigemptyset(&set);
+    sigaddset(&set, sig);
+    t_kernel_thread = true;
+    pthread_sigmask(SIG_UNBLOCK, &set, nullptr);
+
+    sigevent sev{};
+    sev.sigev_notify = SIGEV_THREAD_ID;
+    sev.sigev_signo = sig;
+    sev._sigev_un._tid = static_cast<pid_t>(syscall(SYS_gettid));
+    if (timer_create(CLOCK_MONOTONIC, &sev, &g_timer) != 0) return -errno;
+    g_timer_live = true;
+    return 0;
+}
+
+void timer_arm_locked(std::uint64_t at_ns) {
+    if (!g_timer_live) return;
+    itimerspec its{};
+    if (at_ns != 0) {
+        its.it_value.tv_sec = time_t(at_ns / 1000000000u);
+        its.it_value.tv_nsec = long(at_ns % 1000000000u);
+    }
+    timer_settime(g_timer, TIMER_ABSTIME, &its, nullptr);
+}
+
+void timer_fini() {
+    if (!g_timer_live) return;
+    timer_delete(g_timer);
+    g_timer_live = false;
+    g_tick = nullptr;
+    t_kernel_thread = false;
+}
+
+}  // namespace chm::port

@@ -1,0 +1,28 @@
+// x86-64 inline pieces of the port contract (see ../port.hpp).
+#pragma once
+
+#include <cstdint>
+
+namespace chm::port {
+
+inline bool tas(volatile std::uint8_t* b) {
+    // xchg with memory is locked and a full barrier.
+    std::uint8_t old = 1;
+    __asm__ __volatile__("xchgb %0, %1" : "+q"(old), "+m"(*b) : : "memory");
+    return old == 0;
+}
+
+inline void tas_clear(volatile std::uint8_t* b) {
+    __atomic_store_n(b, 0, __ATOMIC_RELEASE);
+}
+
+inline void relax() { __builtin_ia32_pause(); }
+
+inline constexpr const char* kArchName = "x86_64";
+// The ABI's stack alignment at a call instruction.
+inline constexpr unsigned kStackAlign = 16;
+// At a function's first instruction, (sp + kSpAtEntryBias) % kStackAlign == 0
+// (the call pushed an 8-byte return address onto an aligned stack).
+inline constexpr unsigned kSpAtEntryBias = 8;
+
+}  // namespace chm::port

@@ -1,0 +1,56 @@
+/* x86-64 context switch (System V ABI). Saves what a callee must preserve:
+ * rbx, rbp, r12-r15, the MXCSR and the x87 control word. Everything else is
+ * caller-saved, so the compiler has already spilled it around the call.
+ *
+ *   void chm_port_switch(void **save_sp, void *load_sp)   rdi, rsi
+ *
+ * Frame on the suspended stack (low to high):
+ *   [mxcsr:4][x87cw:2][pad:2] r15 r14 r13 r12 rbx rbp <return address>
+ */
+    .text
+    .globl  chm_port_switch
+    .type   chm_port_switch, @function
+    .p2align 4
+chm_port_switch:
+    .cfi_startproc
+    pushq   %rbp
+    pushq   %rbx
+    pushq   %r12
+    pushq   %r13
+    pushq   %r14
+    pushq   %r15
+    subq    $8, %rsp
+    stmxcsr (%rsp)
+    fnstcw  4(%rsp)
+    movq    %rsp, (%rdi)
+    movq    %rsi, %rsp
+    ldmxcsr (%rsp)
+    fldcw   4(%rsp)
+    addq    $8, %rsp
+    popq    %r15
+    popq    %r14
+    popq    %r13
+    popq    %r12
+    popq    %rbx
+    popq    %rbp
+    ret
+    .cfi_endproc
+    .size   chm_port_switch, .-chm_port_switch
+
+/* First instruction of every new context: context_init leaves entry in r12
+ * and its argument in r13, and the stack 16-byte aligned here, so the call
+ * below enters `entry` with rsp+8 aligned as the ABI wants. */
+    .globl  chm_port_context_start
+    .type   chm_port_context_start, @function
+    .p2align 4
+chm_port_context_start:
+    .cfi_startproc
+    .cfi_undefined rip
+    xorl    %ebp, %ebp
+    movq    %r13, %rdi
+    call    *%r12
+    ud2
+    .cfi_endproc
+    .size   chm_port_context_start, .-chm_port_context_start
+
+    .section .note.GNU-stack,"",@progbits

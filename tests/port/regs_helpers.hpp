@@ -1,0 +1,29 @@
+// Assembly helpers every port supplies in tests/port/<arch>/regs.S.
+#pragma once
+
+#include <cstdint>
+
+extern "C" {
+// Load seed+1, seed+2, ... into every callee-saved integer register, a
+// matching pattern into every callee-saved FP register, a non-default FP
+// control state (round toward zero), call chm_port_switch(save, load), and
+// on return compare everything. Returns 0 when all survived, otherwise the
+// 1-based number of the first register that changed.
+int chm_test_switch_check(void** save_sp, void* load_sp, std::uint64_t seed);
+
+struct ChmTestClobberArgs {
+    void** save;  // where this context's sp is saved
+    void** back;  // where the checker's sp was saved
+};
+// Context entry: forever set every callee-saved register and the FP control
+// state to garbage, then switch back to *back.
+void chm_test_clobber_entry(void* args);
+
+struct ChmTestSpProbe {
+    std::uintptr_t sp_at_entry;
+    void** save;
+    void** back;
+};
+// Context entry: record the stack pointer as found on entry, switch back.
+void chm_test_sp_probe_entry(void* probe);
+}
