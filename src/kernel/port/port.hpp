@@ -149,6 +149,53 @@ int timer_signal();
 // (they are ignored; a test proves this stays zero).
 std::uint64_t stray_signal_count();
 
+// ------------------------------------------------------------ preemption
+//
+// How a timer signal preempts a green thread without switching inside the
+// handler: the handler (on the alternate stack) rewrites the interrupted
+// context so that, after sigreturn, the interrupted task itself calls the
+// kernel through a trampoline on its own stack, as if it had called
+// chm_kernel's preempt entry at that instruction. Consequences, on purpose:
+//  * no signal frame (~3.3 KB on x86-64) ever sits on a task stack;
+//  * no task is ever first entered inside a handler, so none inherits the
+//    handler's blocked signal mask (sigreturn restores it before the switch);
+//  * the switch itself is the ordinary chm_port_switch, in task context.
+
+// The function the trampoline calls, with the interrupt mask held (nest == 1,
+// set by the handler before it redirects). It returns, with the mask
+// released, when the preempted task is scheduled again.
+using PreemptHook = void (*)();
+extern "C" PreemptHook chm_port_preempt_hook;
+
+// Rewrite `ucontext` (the handler's third argument) so that the interrupted
+// task, once the handler returns, runs chm_port_preempt_trampoline on its own
+// stack: it saves every register (caller-saved and callee-saved integer
+// registers, flags / condition codes, the full FP/SIMD state and its control
+// and status registers), calls chm_port_preempt_hook, restores everything
+// and resumes at the interrupted PC as if nothing happened.
+//
+// Pre:  signal context on the kernel thread; the interrupted PC is
+//       preemptible (see below); the interrupted stack has room for the
+//       trampoline's frame (kPreemptFrameMax bytes) below its stack pointer
+//       and the ABI's red zone.
+// Post: only the ucontext is modified; nothing runs yet.
+void redirect_to_preempt_from_signal(void* ucontext);
+
+// The interrupted program counter and stack pointer of a signal's ucontext.
+std::uintptr_t interrupted_pc_from_signal(const void* ucontext);
+std::uintptr_t interrupted_sp_from_signal(const void* ucontext);
+
+// Code ranges in which a task may be preempted. Outside them (the C
+// library, the dynamic linker, any other shared object) a preemption is
+// deferred: the tick is recorded as pending and retried after
+// kPreemptRetryNs, so a task is never switched out while it holds a C
+// library lock. By default the main executable's code is preemptible; the
+// kernel adds each control program it loads. Task context, mask held.
+int preemptible_range_add(std::uintptr_t lo, std::uintptr_t hi);
+void preemptible_range_remove(std::uintptr_t lo, std::uintptr_t hi);
+bool preemptible_pc_from_signal(std::uintptr_t pc);
+inline constexpr std::uint64_t kPreemptRetryNs = 20000;
+
 // ------------------------------------------------------------------ idle
 
 // Sleep until the timer fires or wake() is called, using no CPU. Called by
