@@ -1,0 +1,66 @@
+# The entry point for people: `make demo`, `make test`, `make bench`.
+# Each target installs the Debian packages it needs (only those missing),
+# configures with meson, builds and runs.
+
+BUILD       ?= build
+BUILD_BENCH ?= build-release
+MESON_TEST  ?= meson test --print-errorlogs --num-processes 2
+
+PKGS_BUILD = meson ninja-build g++ pkg-config python3 libgtest-dev libgmock-dev \
+             libboost-dev libboost-context-dev libeigen3-dev
+PKGS_CROSS = g++-m68k-linux-gnu libc6-dev-m68k-cross \
+             g++-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user
+PKGS_BENCH = libbenchmark-dev rt-tests python3-matplotlib
+
+.PHONY: all deps deps-cross deps-bench build demo test test-native test-m68k \
+        test-aarch64 bench clean
+
+all: build
+
+deps:
+	@tools/install-deps.sh $(PKGS_BUILD)
+
+deps-cross:
+	@tools/install-deps.sh $(PKGS_CROSS)
+
+deps-bench:
+	@tools/install-deps.sh $(PKGS_BUILD) $(PKGS_BENCH)
+
+$(BUILD)/build.ninja:
+	meson setup $(BUILD)
+
+build: deps $(BUILD)/build.ninja
+	meson compile -C $(BUILD)
+
+demo: build
+	$(BUILD)/examples/chimera-demo
+
+test: test-native test-m68k test-aarch64
+
+test-native: deps deps-bench $(BUILD)/build.ninja
+	meson compile -C $(BUILD)
+	$(MESON_TEST) -C $(BUILD)
+
+build-m68k/build.ninja:
+	meson setup build-m68k --cross-file cross/m68k.ini
+
+build-aarch64/build.ninja:
+	meson setup build-aarch64 --cross-file cross/aarch64.ini
+
+test-m68k: deps deps-cross build-m68k/build.ninja
+	meson compile -C build-m68k
+	$(MESON_TEST) -C build-m68k --suite m68k
+
+test-aarch64: deps deps-cross build-aarch64/build.ninja
+	meson compile -C build-aarch64
+	$(MESON_TEST) -C build-aarch64 --suite aarch64
+
+$(BUILD_BENCH)/build.ninja:
+	meson setup $(BUILD_BENCH) --buildtype=release
+
+bench: deps-bench $(BUILD_BENCH)/build.ninja
+	meson compile -C $(BUILD_BENCH)
+	/usr/bin/python3 bench/run.py --build $(BUILD_BENCH) $(if $(QUICK),--quick,)
+
+clean:
+	rm -rf $(BUILD) $(BUILD_BENCH) build-m68k build-aarch64
