@@ -27,3 +27,14 @@ struct ChmTestSpProbe {
 // Context entry: record the stack pointer as found on entry, switch back.
 void chm_test_sp_probe_entry(void* probe);
 }
+
+extern "C" {
+// Preemption conformance: number of registers the spin checks, the patterns
+// it loads, and the spin itself. Loads every general and FP/SIMD register
+// the port saves with chm_test_preempt_patterns[i], sets the carry (or the
+// target's equivalent condition flag), spins `iterations` times touching no
+// register, then stores every register into out[0..kChmPreemptRegs) and the
+// flags word into out[kChmPreemptRegs].
+extern const std::uint64_t chm_test_preempt_patterns[];
+void chm_test_preempt_spin(std::uint64_t iterations, std::uint64_t* out);
+}

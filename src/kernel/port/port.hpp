@@ -149,6 +149,10 @@ int timer_signal();
 // (they are ignored; a test proves this stays zero).
 std::uint64_t stray_signal_count();
 
+// Number of preemptions deferred because the task was outside preemptible
+// code (statistics; the kernel reports it).
+std::uint64_t deferred_preemption_count();
+
 // ------------------------------------------------------------ preemption
 //
 // How a timer signal preempts a green thread without switching inside the
@@ -161,11 +165,15 @@ std::uint64_t stray_signal_count();
 //    handler's blocked signal mask (sigreturn restores it before the switch);
 //  * the switch itself is the ordinary chm_port_switch, in task context.
 
+// A port that implements this section defines CHM_PORT_HAS_PREEMPTION to 1
+// in its arch.hpp and provides <arch>/preempt.cpp and <arch>/preempt.S; until
+// then the kernel on that port switches only at kernel calls.
+
 // The function the trampoline calls, with the interrupt mask held (nest == 1,
 // set by the handler before it redirects). It returns, with the mask
 // released, when the preempted task is scheduled again.
 using PreemptHook = void (*)();
-extern "C" PreemptHook chm_port_preempt_hook;
+extern "C" __attribute__((visibility("hidden"))) PreemptHook chm_port_preempt_hook;
 
 // Rewrite `ucontext` (the handler's third argument) so that the interrupted
 // task, once the handler returns, runs chm_port_preempt_trampoline on its own

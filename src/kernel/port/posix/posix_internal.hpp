@@ -8,4 +8,7 @@ namespace chm::port {
 // Bumped by the timer handler and idle_wake(); idle sleeps on it.
 extern std::uint32_t g_wake_seq;
 
+// Register the main program's code as preemptible (once).
+void preemptible_ranges_init();
+
 }  // namespace chm::port

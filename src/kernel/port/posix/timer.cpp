@@ -26,7 +26,10 @@ std::uint64_t g_stray = 0;
 // initial-exec: no lazy TLS allocation inside the handler.
 __attribute__((tls_model("initial-exec"))) thread_local bool t_kernel_thread = false;
 
-void on_timer(int, siginfo_t*, void*) {
+std::uint64_t g_deferred = 0;
+unsigned g_defer_streak = 0;  // consecutive deferrals: backs the retry off
+
+void on_timer(int, siginfo_t*, void* ucontext) {
     if (!t_kernel_thread) {  // a process-directed copy reached another thread
         __atomic_fetch_add(&g_stray, 1, __ATOMIC_RELAXED);
         return;
@@ -38,7 +41,32 @@ void on_timer(int, siginfo_t*, void*) {
     } else {
         g_irq.nest = 1;
         __atomic_signal_fence(__ATOMIC_SEQ_CST);
-        if (g_tick) g_tick(now_ns());
+        const std::uint64_t now = now_ns();
+        if (g_tick && g_tick(now)) {
+#if CHM_PORT_HAS_PREEMPTION
+            if (chm_port_preempt_hook &&
+                preemptible_pc_from_signal(interrupted_pc_from_signal(ucontext))) {
+                // The task calls the hook itself after sigreturn; the mask
+                // stays held until the kernel releases it there.
+                redirect_to_preempt_from_signal(ucontext);
+                g_defer_streak = 0;
+                errno = saved_errno;
+                return;
+            }
+#else
+            (void)ucontext;
+#endif
+            // Inside the C library or another foreign object: keep the tick
+            // pending (taken at the next irq_restore) and retry shortly. A
+            // long library call (a big memset) backs the retry off, 20 µs
+            // doubling up to 320 µs, so retries cannot eat the CPU when a
+            // signal costs as much as the retry period (virtual machines).
+            g_irq.pending = 1;
+            ++g_deferred;
+            const unsigned shift = g_defer_streak < 4 ? g_defer_streak : 4;
+            ++g_defer_streak;
+            timer_arm_locked(now_ns() + (kPreemptRetryNs << shift));
+        }
         __atomic_signal_fence(__ATOMIC_SEQ_CST);
         g_irq.nest = 0;
     }
@@ -49,11 +77,14 @@ void on_timer(int, siginfo_t*, void*) {
 
 int timer_signal() { return SIGRTMIN + 2; }
 
+std::uint64_t deferred_preemption_count() { return g_deferred; }
+
 std::uint64_t stray_signal_count() { return __atomic_load_n(&g_stray, __ATOMIC_RELAXED); }
 
 int timer_init(TickHandler handler) {
     if (g_timer_live) return -EBUSY;
     g_tick = handler;
+    preemptible_ranges_init();
     const int sig = timer_signal();
 
     if (!g_altstack) {

@@ -3,6 +3,9 @@
 
 #include <cstdint>
 
+// This port implements the preemption trampoline (preempt.S).
+#define CHM_PORT_HAS_PREEMPTION 1
+
 namespace chm::port {
 
 inline bool tas(volatile std::uint8_t* b) {
@@ -24,5 +27,8 @@ inline constexpr unsigned kStackAlign = 16;
 // At a function's first instruction, (sp + kSpAtEntryBias) % kStackAlign == 0
 // (the call pushed an 8-byte return address onto an aligned stack).
 inline constexpr unsigned kSpAtEntryBias = 8;
+// Stack the preemption trampoline may use below an interrupted stack
+// pointer: red zone, saved registers, alignment and an AVX-512 XSAVE area.
+inline constexpr unsigned kPreemptFrameMax = 4096;
 
 }  // namespace chm::port
