@@ -1,0 +1,11 @@
+/* Chimera: everything a control program needs, in one include. */
+#ifndef CHIMERA_H
+#define CHIMERA_H
+
+#include "chimera/kernel.h"
+#include "chimera/sched.h"
+#include "chimera/sem.h"
+#include "chimera/task.h"
+#include "chimera/usig.h"
+
+#endif

@@ -1,0 +1,84 @@
+/* Chimera kernel: start, run and stop one RTPU's kernel; time.
+ *
+ * Every function returns 0 (CHM_OK) or a negative errno-style status and
+ * never throws. Calling-context rules: functions marked "task context" must
+ * be called from a task; others say where they may be called. */
+#ifndef CHIMERA_KERNEL_H
+#define CHIMERA_KERNEL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define CHM_OK 0
+
+/* Built-in scheduling policies (DESIGN.md, "The policies, precisely"). */
+enum chm_sched_policy {
+    CHM_SCHED_MUF = 0, /* maximum urgency first: criticality, laxity, priority (default) */
+    CHM_SCHED_RM = 1,  /* rate monotonic: shorter period first, then priority */
+    CHM_SCHED_EDF = 2, /* earliest absolute deadline first */
+    CHM_SCHED_MLF = 3, /* minimum laxity first */
+    CHM_SCHED_FIXED = 4, /* static user priority only */
+    CHM_SCHED_USER = 5   /* the ops table given in chm_kernel_config.user_sched */
+};
+
+struct chm_sched_ops; /* see chimera/sched.h */
+
+typedef struct chm_kernel_config {
+    enum chm_sched_policy policy;        /* default CHM_SCHED_MUF */
+    const struct chm_sched_ops* user_sched; /* with CHM_SCHED_USER */
+    void* user_sched_arg;                /* passed to every user op */
+    uint64_t quantum_ns;  /* round robin among equals; 0 = none. Default 1 ms */
+    int virtual_clock;    /* 1: time advances only through chm_time_consume() */
+    size_t default_stack; /* stack of tasks spawned with stack_size 0; default 64 KiB */
+    int rtpu_id;          /* the RTPU number printed in diagnostics (default 1) */
+} chm_kernel_config_t;
+
+/* Fill `cfg` with the defaults above. */
+void chm_kernel_config_init(chm_kernel_config_t* cfg);
+
+/* Initialise the kernel on the calling thread, which becomes the kernel
+ * thread (it receives the one timer signal). NULL means defaults.
+ * Errors: -EBUSY already initialised; -EINVAL bad config (unknown policy,
+ * CHM_SCHED_USER without a complete ops table, quantum below 10 µs);
+ * -ENOMEM; or the error of timer creation. */
+int chm_kernel_init(const chm_kernel_config_t* cfg);
+
+/* Run the tasks spawned so far (and those they spawn) until every task has
+ * ended or chm_kernel_stop() is called. Returns the stop code (0 when all
+ * tasks ended). Call on the kernel thread after chm_kernel_init.
+ * Errors: -EPERM not initialised or called from a task. */
+int chm_kernel_run(void);
+
+/* Stop the RTPU gracefully: shutdown hooks run (most recently registered
+ * first), then chm_kernel_run returns `code`. Task context. Does not return
+ * to the caller. */
+void chm_kernel_stop(int code);
+
+/* Register a hook run by chm_kernel_stop (actuators first: register them
+ * last). Up to 32 hooks. Errors: -ENOSPC, -EINVAL for NULL. */
+int chm_kernel_on_shutdown(void (*hook)(void* arg), void* arg);
+
+/* Tear the kernel down after chm_kernel_run returned (tests, embedding):
+ * destroys remaining tasks, frees stacks, deletes the timer. */
+void chm_kernel_fini(void);
+
+/* The policy in force (after a failed user scheduler: CHM_SCHED_MUF). */
+enum chm_sched_policy chm_kernel_policy(void);
+
+/* Monotonic time in ns (virtual time in virtual-clock mode). Any context. */
+uint64_t chm_time_now(void);
+
+/* Virtual-clock mode: the calling task consumes `ns` of CPU time; timers
+ * that fall due meanwhile fire at their exact virtual time and may preempt
+ * the caller, which resumes consuming the rest later. In real-clock mode it
+ * busy-waits `ns` of CPU time. Task context. */
+void chm_time_consume(uint64_t ns);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

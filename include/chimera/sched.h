@@ -1,0 +1,78 @@
+/* Chimera scheduler interface: the operations table every scheduling policy
+ * implements, the built-in ones (RM, EDF, MLF, MUF, fixed priority) and a
+ * user scheduler installed at start-up alike. The kernel calls only these
+ * operations; it has no special case for any policy.
+ *
+ * All operations run with the kernel's interrupt mask held: they must not
+ * block, allocate, call the C library or the Chimera API. */
+#ifndef CHIMERA_SCHED_H
+#define CHIMERA_SCHED_H
+
+#include <stdint.h>
+#include "chimera/task.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* The scheduler's view of one task. The kernel owns and updates every field
+ * but the scratch ones at the end. */
+typedef struct chm_sched_task {
+    chm_tid_t id;
+    int priority;            /* static user priority: higher first */
+    int critical;            /* user-declared critical (MUF) */
+    uint64_t period_ns;      /* 0 = aperiodic */
+    uint64_t deadline_ns;    /* relative deadline */
+    uint64_t wcet_ns;        /* estimated CPU time per cycle */
+    uint64_t release_ns;     /* release of the current cycle */
+    uint64_t abs_deadline_ns;/* absolute deadline of the current cycle; UINT64_MAX aperiodic */
+    uint64_t cycle_cpu_ns;   /* CPU used in the current cycle so far */
+    uint64_t seq;            /* arrival order: among equals, smaller runs first */
+    /* scratch, owned by the scheduler */
+    int32_t slot;
+    int32_t flags;
+    uint64_t key;
+    void* data;
+} chm_sched_task_t;
+
+typedef struct chm_sched_ops {
+    const char* name;
+    /* Required. A new task is known (before it is first enqueued); return 0
+     * to accept it or a negative status (-EAGAIN) to refuse it. */
+    int (*admit)(void* self, chm_sched_task_t* t);
+    /* Required. The task is gone for good (it is not enqueued). */
+    void (*retire)(void* self, chm_sched_task_t* t);
+    /* Required. The task became ready (it is not the running task). */
+    void (*enqueue)(void* self, chm_sched_task_t* t, uint64_t now);
+    /* Required. A ready task left the ready set (it runs, blocks, ends). */
+    void (*dequeue)(void* self, chm_sched_task_t* t);
+    /* Required. The ready task that should run now, left in the ready set;
+     * NULL when none. Returning anything else than an enqueued task is a
+     * scheduler failure: the kernel falls back to MUF and reports it. */
+    chm_sched_task_t* (*pick)(void* self, uint64_t now);
+    /* Required. 1 when `a` must run before `b` now, else 0. Two tasks
+     * neither of which runs before the other share the CPU round robin. */
+    int (*before)(void* self, const chm_sched_task_t* a, const chm_sched_task_t* b, uint64_t now);
+    /* Optional. A new cycle of a periodic task begins (its release and
+     * absolute deadline are already updated; it is not enqueued yet). */
+    void (*release)(void* self, chm_sched_task_t* t, uint64_t now);
+    /* Optional. Called at every tick: refresh dynamic priorities. */
+    void (*update)(void* self, uint64_t now);
+} chm_sched_ops_t;
+
+/* The built-in operations tables (the state they need is the kernel's). */
+extern const chm_sched_ops_t chm_sched_muf_ops;
+extern const chm_sched_ops_t chm_sched_rm_ops;
+extern const chm_sched_ops_t chm_sched_edf_ops;
+extern const chm_sched_ops_t chm_sched_mlf_ops;
+extern const chm_sched_ops_t chm_sched_fixed_ops;
+
+/* Number of times the user scheduler failed and the kernel fell back to MUF
+ * (0 or 1), and the reason of the failure as text ("" when none). */
+int chm_sched_fallbacks(void);
+const char* chm_sched_fallback_reason(void);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,133 @@
+/* Chimera tasks: spawn, destroy, suspend, resume, priorities, periodic
+ * timing, deadline failures, status, CPU lock. */
+#ifndef CHIMERA_TASK_H
+#define CHIMERA_TASK_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* A task id: stays invalid after the task ends (ids are generation-tagged). */
+typedef int32_t chm_tid_t;
+#define CHM_TID_NONE ((chm_tid_t)-1)
+#define CHM_TASK_NAME_MAX 31
+
+/* What a deadline-failure handler decides. */
+enum chm_deadline_action {
+    CHM_DL_CONTINUE = 0,     /* let the late cycle run on */
+    CHM_DL_ABORT_CYCLE = 1,  /* drop this cycle; the entry restarts at the next release */
+    CHM_DL_STOP_RTPU = 2     /* chm_kernel_stop(): shutdown hooks, then stop */
+};
+
+/* Facts handed to a deadline-failure handler. */
+typedef struct chm_deadline_info {
+    chm_tid_t task;
+    uint64_t cycle;          /* the cycle that missed (0-based) */
+    uint64_t deadline_ns;    /* its absolute deadline */
+    uint64_t now_ns;         /* when the handler runs */
+    uint64_t misses;         /* misses so far, this one included */
+} chm_deadline_info_t;
+
+/* Runs in the failing task's context (at handler_priority if set). To
+ * "signal another task" call chm_usig_send() and return a decision. */
+typedef enum chm_deadline_action (*chm_deadline_handler_t)(const chm_deadline_info_t* info, void* arg);
+
+typedef struct chm_task_attr {
+    const char* name;      /* copied; up to CHM_TASK_NAME_MAX chars; NULL = "task" */
+    size_t stack_size;     /* 0 = kernel default; minimum 8 KiB */
+    int priority;          /* static user priority: higher runs first among equals */
+    int critical;          /* MUF: 1 = always in the critical set */
+    uint64_t period_ns;    /* 0 = aperiodic */
+    uint64_t deadline_ns;  /* relative deadline; 0 = the period; must be <= period */
+    uint64_t wcet_ns;      /* estimated worst-case CPU time per cycle (MLF, MUF) */
+    uint64_t start_ns;     /* absolute first release; 0 = now */
+    chm_deadline_handler_t on_deadline; /* NULL: the miss becomes an error signal */
+    void* on_deadline_arg;
+    int handler_priority;  /* 0 = run the handler at the task's own priority */
+} chm_task_attr_t;
+
+/* Fill `attr` with defaults (aperiodic, priority 0, default stack). */
+void chm_task_attr_init(chm_task_attr_t* attr);
+
+/* Create a task running entry(arg); it becomes ready at once (periodic:
+ * at start_ns). May be called before chm_kernel_run (after init) and from
+ * tasks. Errors: -EINVAL NULL entry, stack below 8 KiB, deadline longer than
+ * the period, wcet longer than the deadline, period without a positive
+ * deadline; -ENAMETOOLONG; -EAGAIN the scheduler refused admission;
+ * -ENOMEM; -EPERM kernel not initialised. Nothing is left behind on error. */
+int chm_task_spawn(chm_tid_t* out, void (*entry)(void* arg), void* arg, const chm_task_attr_t* attr);
+
+/* End the calling task. Task context. Does not return. */
+void chm_task_exit(void);
+
+/* Destroy a task (itself included: then like chm_task_exit). Its stack is
+ * freed; semaphores it holds are NOT released (see chm_sem docs).
+ * Errors: -ESRCH unknown task. */
+int chm_task_destroy(chm_tid_t task);
+
+/* Suspend until chm_task_resume (counted). Errors: -ESRCH. */
+int chm_task_suspend(chm_tid_t task);
+/* Errors: -ESRCH; -EINVAL not suspended. */
+int chm_task_resume(chm_tid_t task);
+
+/* Change the static user priority (re-sorts it wherever it waits).
+ * Errors: -ESRCH. */
+int chm_task_set_priority(chm_tid_t task, int priority);
+
+/* The calling task, or CHM_TID_NONE outside a task. Any context. */
+chm_tid_t chm_task_self(void);
+
+/* Find a task by name. Errors: -ESRCH none; -EINVAL NULL. */
+int chm_task_find(const char* name, chm_tid_t* out);
+
+/* Give the CPU to the next ready task of equal urgency, if any. Task context. */
+void chm_task_yield(void);
+
+/* Pause until the absolute time restart_ns (the paper's pause(restart_time)).
+ * Returns 0, or -EINTR when a user signal interrupted the pause. */
+int chm_task_pause_until(uint64_t restart_ns);
+
+/* Periodic tasks: end this cycle and wait for the next release (absolute
+ * release times: no drift). Returns 0, -EINTR (user signal), or -EINVAL for
+ * an aperiodic task. */
+int chm_task_wait_period(void);
+
+/* Lock the calling task into the CPU (no preemption; timers still counted)
+ * and unlock; nestable. Blocking while locked unlocks for the wait. */
+void chm_task_lock(void);
+void chm_task_unlock(void);
+
+enum chm_task_state {
+    CHM_TASK_READY, CHM_TASK_RUNNING, CHM_TASK_BLOCKED, CHM_TASK_SUSPENDED,
+    CHM_TASK_WAITING_PERIOD, CHM_TASK_PAUSED, CHM_TASK_ENDED
+};
+
+typedef struct chm_task_status {
+    chm_tid_t id;
+    char name[CHM_TASK_NAME_MAX + 1];
+    enum chm_task_state state;
+    int priority;             /* static user priority */
+    int critical;             /* in the MUF critical set */
+    uint64_t period_ns, deadline_ns, wcet_ns;
+    uint64_t cpu_ns;          /* CPU time consumed in all */
+    uint64_t cycles;          /* cycles completed */
+    uint64_t misses;          /* deadline misses */
+    uint64_t worst_lateness_ns;   /* worst completion after the deadline */
+    uint64_t worst_cycle_cpu_ns;  /* worst CPU time of one cycle */
+    size_t stack_size;
+    size_t stack_high_water;  /* most stack ever used, bytes */
+} chm_task_status_t;
+
+/* Snapshot of a task. Errors: -ESRCH, -EINVAL NULL. */
+int chm_task_status(chm_tid_t task, chm_task_status_t* out);
+
+/* Number of tasks alive. Any context. */
+int chm_task_count(void);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,210 @@
+// Dispatching: who runs, the switch itself, and the three ways into it —
+// a kernel call that blocks or wakes (task context), the timer signal
+// redirected through the port's preemption trampoline, and a tick that
+// arrived while the mask was held (irq_restore's pending hook).
+#include <cerrno>
+
+#include "kernel.hpp"
+
+namespace chm::kernel {
+
+Kernel g_k;
+
+void charge_current_locked(std::uint64_t now) {
+    Tcb* cur = g_k.current;
+    if (!cur) return;
+    const std::uint64_t d = now - g_k.switched_in_at;
+    cur->cpu_ns += d;
+    cur->s.cycle_cpu_ns += d;
+    g_k.switched_in_at = now;
+}
+
+void make_ready_locked(Tcb* t, bool keep_place) {
+    if (t->suspend_count) {  // a suspended task's wait ended: stay suspended
+        t->state = TaskState::Suspended;
+        return;
+    }
+    t->state = TaskState::Ready;
+    if (!keep_place) t->s.seq = ++g_k.seq;
+    if (!t->in_ready) {
+        t->in_ready = true;
+        g_k.ops->enqueue(g_k.ops_self, &t->s, now_locked());
+    }
+}
+
+void unready_locked(Tcb* t) {
+    if (t->in_ready) {
+        t->in_ready = false;
+        g_k.ops->dequeue(g_k.ops_self, &t->s);
+    }
+}
+
+bool must_switch_locked(std::uint64_t now) {
+    Tcb* cur = g_k.current;
+    if (!cur) return false;
+    if (cur->state != TaskState::Running) return true;
+    if (cur->lock_nest) return false;  // locked into the CPU
+    if (cur->sig_pending & ~cur->sig_blocked) return true;
+    if (cur->miss_pending) return true;
+    Tcb* head = sched_pick_locked(now);
+    if (!head) return false;
+    if (sched_before_locked(head, cur, now)) return true;
+    // Round robin among equals when the quantum has run out.
+    return g_k.quantum_due && now >= g_k.quantum_due && !sched_before_locked(cur, head, now);
+}
+
+namespace {
+
+// Round robin: a quantum runs only while an equal task waits for the CPU, so
+// a task alone at its urgency is never interrupted for nothing (tickless).
+void arm_quantum_if_shared_locked(Tcb* t, std::uint64_t now) {
+    if (!g_k.cfg.quantum_ns || g_k.quantum_due) return;
+    Tcb* head = sched_pick_locked(now);
+    if (!head || sched_before_locked(t, head, now)) return;
+    g_k.quantum_due = now + g_k.cfg.quantum_ns;
+    timer_program_locked(now);
+}
+
+// Switch from the current context (a task or the kernel's own) to `next`
+// (nullptr = the kernel's idle loop). Returns in the original context when
+// it is scheduled again.
+void switch_to_locked(Tcb* next, std::uint64_t now) {
+    Tcb* prev = g_k.current;
+    port::Context* from = prev ? &prev->ctx : &g_k.idle_ctx;
+    port::Context* to = next ? &next->ctx : &g_k.idle_ctx;
+    if (prev) prev->saved_errno = errno;
+    g_k.current = next;
+    g_k.switched_in_at = now;
+    g_k.quantum_due = 0;
+    if (next) arm_quantum_if_shared_locked(next, now);
+    ++g_k.switches;
+    port::context_switch(from, to);
+    // Back in `prev`'s context.
+    if (Tcb* z = g_k.zombie) {  // its stack is no longer in use
+        g_k.zombie = nullptr;
+        task_free_stack(z);
+    }
+    if (g_k.current) errno = g_k.current->saved_errno;
+}
+
+}  // namespace
+
+void schedule_locked() {
+    const std::uint64_t now = now_locked();
+    charge_current_locked(now);
+    Tcb* cur = g_k.current;
+    const bool cur_runs = cur && cur->state == TaskState::Running;
+    if (cur_runs && cur->lock_nest) return;
+    Tcb* head = sched_pick_locked(now);
+    if (cur_runs) {
+        if (!head) return;
+        const bool quantum_over = g_k.quantum_due && now >= g_k.quantum_due;
+        if (!sched_before_locked(head, cur, now)) {
+            if (sched_before_locked(cur, head, now)) return;
+            if (!quantum_over) {
+                arm_quantum_if_shared_locked(cur, now);
+                return;
+            }
+            make_ready_locked(cur);  // round robin: to the back of its equals
+        } else {
+            make_ready_locked(cur, true);  // preempted: first among its equals
+        }
+    }
+    if (head) {
+        unready_locked(head);
+        head->state = TaskState::Running;
+    }
+    if (head == cur) return;
+    switch_to_locked(head, now);
+}
+
+int block_current_locked() {
+    Tcb* cur = g_k.current;
+    schedule_locked();
+    return cur->wait_result;
+}
+
+void deliver_pending_locked() {
+    for (;;) {
+        Tcb* cur = g_k.current;
+        if (!cur) return;
+        if (cur->miss_pending) {
+            cur->miss_pending = false;
+            chm_deadline_info_t info{chm_tid_t(cur->index | (std::uint32_t(cur->gen) << 16)),
+                                     cur->missed_cycle, cur->missed_deadline, now_locked(),
+                                     cur->misses};
+            chm_deadline_action act = CHM_DL_CONTINUE;
+            if (cur->on_deadline) {
+                const int own_prio = cur->s.priority;
+                if (cur->handler_priority) cur->s.priority = cur->handler_priority;
+                port::irq_restore();
+                act = cur->on_deadline(&info, cur->on_deadline_arg);
+                port::irq_disable();
+                cur->s.priority = own_prio;
+            }
+            if (act == CHM_DL_STOP_RTPU) {
+                port::irq_restore();
+                chm_kernel_stop(0);
+            }
+            if (act == CHM_DL_ABORT_CYCLE) {
+                cur->abort_cycle = true;
+                port::irq_restore();
+                chm_task_wait_period();  // restarts the entry at the next release
+                port::irq_disable();
+            }
+            continue;
+        }
+        const std::uint32_t sigs = cur->sig_pending & ~cur->sig_blocked;
+        if (!sigs) return;
+        const int signo = __builtin_ctz(sigs);
+        cur->sig_pending &= ~(1u << signo);
+        chm_usig_handler_t h = cur->sig_handler[signo];
+        if (h) {
+            void* a = cur->sig_arg[signo];
+            port::irq_restore();
+            h(signo, a);
+            port::irq_disable();
+        }
+    }
+}
+
+namespace {
+
+// The port's preemption trampoline calls this in the interrupted task's
+// context, mask held.
+void preempted_from_trampoline() {
+    schedule_locked();
+    deliver_pending_locked();
+    port::irq_restore();
+}
+
+// A tick that landed while the mask was held; runs with the mask held.
+void pending_tick() {
+    const std::uint64_t now = now_locked();
+    timers_run_locked(now);
+    timer_program_locked(now);
+    if (g_k.current && must_switch_locked(now)) {
+        schedule_locked();
+        deliver_pending_locked();
+    }
+}
+
+// The timer signal, on the alternate stack, mask held by the port.
+bool tick_from_signal(std::uint64_t now) {
+    ++g_k.ticks;
+    g_k.armed_at = 0;
+    timers_run_locked(now);
+    timer_program_locked(now);
+    return g_k.current && must_switch_locked(now);
+}
+
+}  // namespace
+
+void dispatch_install_hooks() {
+    port::irq_set_pending_hook(pending_tick);
+    port::chm_port_preempt_hook = preempted_from_trampoline;
+}
+
+port::TickHandler dispatch_tick_handler() { return tick_from_signal; }
+
+}  // namespace chm::kernel

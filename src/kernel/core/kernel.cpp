@@ -1,0 +1,167 @@
+// The kernel's life: init on the kernel thread, the run loop (which is also
+// the idle context), graceful stop with shutdown hooks, and teardown.
+#include <cerrno>
+#include <cstring>
+#include <sys/mman.h>
+
+#include "kernel.hpp"
+
+namespace chm::kernel {
+
+void dispatch_install_hooks();
+port::TickHandler dispatch_tick_handler();
+
+namespace {
+
+void run_shutdown_hooks() {
+    while (g_k.nhooks > 0) {
+        const Kernel::Hook h = g_k.hooks[--g_k.nhooks];
+        h.fn(h.arg);
+    }
+}
+
+// The idle loop: runs in chm_kernel_run's context with the mask held,
+// dispatches whenever something is ready and otherwise sleeps.
+int idle_loop_locked() {
+    for (;;) {
+        if (g_k.stopping) return g_k.stop_code;
+        if (g_k.alive == 0) return 0;
+        const std::uint64_t now = now_locked();
+        if (g_k.cfg.virtual_clock) timers_run_locked(now);
+        Tcb* head = sched_pick_locked(now);
+        if (head) {
+            schedule_locked();  // switches to it; returns when idle again
+            continue;
+        }
+        if (g_k.cfg.virtual_clock) {
+            const std::uint64_t due = next_due_locked();
+            if (!due) return -EDEADLK;  // every task waits for ever
+            if (due > g_k.vnow) g_k.vnow = due;  // idle time passes at once
+            continue;
+        }
+        timer_program_locked(now);
+        port::idle_wait_locked();
+        if (port::g_irq.pending) {
+            port::g_irq.pending = 0;
+            g_k.armed_at = 0;
+            const std::uint64_t t = now_locked();
+            timers_run_locked(t);
+            timer_program_locked(t);
+        }
+    }
+}
+
+}  // namespace
+
+}  // namespace chm::kernel
+
+using namespace chm::kernel;
+namespace port = chm::port;
+
+extern "C" {
+
+void chm_kernel_config_init(chm_kernel_config_t* cfg) {
+    if (!cfg) return;
+    *cfg = chm_kernel_config_t{};
+    cfg->policy = CHM_SCHED_MUF;
+    cfg->quantum_ns = 1000000;
+    cfg->default_stack = 64 * 1024;
+    cfg->rtpu_id = 1;
+}
+
+int chm_kernel_init(const chm_kernel_config_t* cfg) {
+    if (g_k.initialised) return -EBUSY;
+    chm_kernel_config_t c;
+    chm_kernel_config_init(&c);
+    if (cfg) c = *cfg;
+    if (c.quantum_ns && c.quantum_ns < 10000) return -EINVAL;
+    if (!c.default_stack) c.default_stack = 64 * 1024;
+    if (int e = sched_select(c.policy, c.user_sched, c.user_sched_arg)) return e;
+    g_k.cfg = c;
+    g_k.vnow = 0;
+    if (!c.virtual_clock) {
+        dispatch_install_hooks();
+        if (int e = port::timer_init(dispatch_tick_handler())) return e;
+    } else {
+        port::irq_set_pending_hook(nullptr);
+    }
+    g_k.initialised = true;
+    return 0;
+}
+
+int chm_kernel_run(void) {
+    if (!g_k.initialised || g_k.current) return -EPERM;
+    port::irq_disable();
+    g_k.running = true;
+    const int r = idle_loop_locked();
+    g_k.running = false;
+    port::irq_restore();
+    return r;
+}
+
+void chm_kernel_stop(int code) {
+    port::irq_disable();
+    if (!g_k.stopping) {
+        g_k.stopping = true;
+        g_k.stop_code = code;
+        port::irq_restore();
+        run_shutdown_hooks();  // in the caller's context: hooks may block briefly
+        port::irq_disable();
+    }
+    // Leave for the run loop; the tasks stay as they are until fini.
+    Tcb* cur = g_k.current;
+    if (cur) {
+        unready_locked(cur);
+        cur->state = TaskState::Suspended;
+        ++cur->suspend_count;
+        g_k.current = nullptr;
+        port::Context* from = &cur->ctx;
+        port::context_switch(from, &g_k.idle_ctx);
+    }
+    port::irq_restore();
+}
+
+int chm_kernel_on_shutdown(void (*hook)(void*), void* arg) {
+    if (!hook) return -EINVAL;
+    IrqGuard guard;
+    if (g_k.nhooks >= 32) return -ENOSPC;
+    g_k.hooks[g_k.nhooks++] = Kernel::Hook{hook, arg};
+    return 0;
+}
+
+void chm_kernel_fini(void) {
+    if (!g_k.initialised || g_k.running) return;
+    port::irq_disable();
+    for (std::uint32_t i = 0; i < g_k.tcb_hw; ++i) {
+        Tcb* t = &g_k.tcbs[i];
+        if (!t->used) continue;
+        if (t->state != TaskState::Ended) task_end_locked(t);
+        if (t->stack_lo) task_free_stack(t);
+    }
+    g_k.zombie = nullptr;
+    port::irq_restore();
+    if (!g_k.cfg.virtual_clock) port::timer_fini();
+    port::irq_set_pending_hook(nullptr);
+    port::chm_port_preempt_hook = nullptr;
+    // Keep the reserved TCB array and the heaps' storage for a next init;
+    // reset everything else.
+    Tcb* tcbs = g_k.tcbs;
+    const std::uint32_t hw = g_k.tcb_hw;
+    ReadyHeap rq = g_k.rq;
+    TimerHeap timers = g_k.timers;
+    while (rq.size()) rq.remove(rq.top());
+    while (timers.size()) timers.remove(timers.top());
+    g_k = Kernel{};
+    g_k.tcbs = tcbs;
+    g_k.rq = rq;
+    g_k.timers = timers;
+    // Slots keep their generation so stale ids never match a new task.
+    for (std::uint32_t i = 0; i < hw; ++i) {
+        tcbs[i].used = false;
+        tcbs[i].next_free = i + 1 < hw ? std::int32_t(i + 1) : -1;
+    }
+    g_k.tcb_hw = hw;
+    g_k.free_slot = hw ? 0 : -1;
+}
+
+}  // extern "C"

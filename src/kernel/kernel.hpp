@@ -1,0 +1,272 @@
+// The kernel's internal state: the task control block, the kernel object
+// and the functions kernel files call on one another. Nothing here is public
+// API (that is include/chimera/*.h).
+//
+// Locking rule: every field below is read and written only with the port's
+// interrupt mask held (functions named *_locked), except where a comment
+// says otherwise.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "chimera/kernel.h"
+#include "chimera/sched.h"
+#include "chimera/task.h"
+#include "chimera/usig.h"
+#include "port.hpp"
+
+namespace chm::kernel {
+
+struct Tcb;
+
+// One pending timed event, intrusive in its owner; lives in the timer heap.
+enum class TimerKind : std::uint8_t { Wake, Release, Deadline };
+struct TimerNode {
+    std::uint64_t due = 0;
+    std::int32_t idx = -1;  // slot in the timer heap; -1 = not armed
+    TimerKind kind = TimerKind::Wake;
+    Tcb* owner = nullptr;
+};
+
+// Tasks blocked on one object, most urgent first (by the scheduler's
+// `before`, then arrival).
+struct WaitQueue {
+    Tcb* head = nullptr;
+};
+
+enum class TaskState : std::uint8_t {
+    Ready, Running, Blocked, Suspended, WaitPeriod, Paused, Ended
+};
+
+struct Tcb {
+    port::Context ctx;
+    chm_sched_task_t s;      // the scheduler's view
+    TaskState state = TaskState::Ready;
+    bool in_ready = false;   // enqueued in the scheduler
+    bool used = false;
+    std::uint16_t gen = 0;
+    std::uint32_t index = 0;
+    std::int32_t next_free = -1;
+    int saved_errno = 0;
+    std::uint32_t lock_nest = 0;      // chm_task_lock depth
+    std::uint32_t suspend_count = 0;
+    TaskState suspended_from = TaskState::Ready;
+
+    // Blocking.
+    WaitQueue* wq = nullptr;
+    Tcb* wnext = nullptr;
+    int wait_result = 0;
+    bool interruptible = false;
+    TimerNode tmr;  // wake-up (pause, timeout) or release of a periodic task
+    TimerNode dl;   // deadline of the current cycle
+
+    // User signals.
+    std::uint32_t sig_pending = 0;
+    std::uint32_t sig_blocked = 0;
+    chm_usig_handler_t sig_handler[CHM_USIG_MAX + 1] = {};
+    void* sig_arg[CHM_USIG_MAX + 1] = {};
+
+    // Periodic timing and deadline failures.
+    std::uint64_t cycle = 0;          // index of the current cycle
+    bool miss_pending = false;        // handler owed for cycle `missed_cycle`
+    std::uint64_t missed_cycle = 0;
+    std::uint64_t missed_deadline = 0;
+    chm_deadline_handler_t on_deadline = nullptr;
+    void* on_deadline_arg = nullptr;
+    int handler_priority = 0;
+    bool abort_cycle = false;         // restart the entry at the next release
+    bool awaiting_release = false;    // cycle completed, next release not yet taken
+    bool release_pending = false;     // the release came while it was not waiting
+    std::uint64_t pending_release = 0;
+
+    // Statistics.
+    std::uint64_t cpu_ns = 0;
+    std::uint64_t cycles_done = 0;
+    std::uint64_t misses = 0;
+    std::uint64_t worst_lateness = 0;
+    std::uint64_t worst_cycle_cpu = 0;
+
+    // Priority inheritance: the view fields this task owns while it lends
+    // a waiter's urgency.
+    bool boosted = false;
+    chm_sched_task_t own;
+
+    // Stack (from the stack pool) and entry.
+    unsigned char* stack_lo = nullptr;
+    std::size_t stack_size = 0;
+    std::size_t stack_dirty = 0;  // bytes below the top ever written (high water)
+    void (*entry)(void*) = nullptr;
+    void* arg = nullptr;
+    char name[CHM_TASK_NAME_MAX + 1] = {};
+};
+
+inline constexpr std::uint32_t kMaxTasks = 32768;
+
+inline Tcb* tcb_of(chm_sched_task_t* s) {
+    return reinterpret_cast<Tcb*>(reinterpret_cast<char*>(s) - offsetof(Tcb, s));
+}
+
+// A binary min-heap of pointers with each element's slot stored in the
+// element: O(log n) push, remove and update, O(1) top. Storage is grown only
+// by reserve(), outside the interrupt mask.
+template <class T, class Less, class Slot>
+class IndexedHeap {
+public:
+    bool reserve(std::size_t n);
+    void push(T* x);
+    void remove(T* x);
+    T* top() const { return size_ ? data_[0] : nullptr; }
+    std::size_t size() const { return size_; }
+    T* at(std::size_t i) const { return data_[i]; }
+    Less less;
+
+private:
+    void sift_up(std::size_t i);
+    void sift_down(std::size_t i);
+    void place(std::size_t i, T* x) { data_[i] = x; Slot::set(x, std::int32_t(i)); }
+    T** data_ = nullptr;
+    std::size_t size_ = 0, cap_ = 0;
+};
+
+struct TimerLess {
+    bool operator()(const TimerNode* a, const TimerNode* b) const { return a->due < b->due; }
+};
+struct TimerSlot {
+    static void set(TimerNode* n, std::int32_t i) { n->idx = i; }
+};
+struct ReadyLess {
+    const chm_sched_ops_t* ops = nullptr;
+    void* self = nullptr;
+    std::uint64_t now = 0;
+    // The policy decides; equals (round-robin partners) go by arrival.
+    bool operator()(const chm_sched_task_t* a, const chm_sched_task_t* b) const {
+        if (ops->before(self, a, b, now)) return true;
+        if (ops->before(self, b, a, now)) return false;
+        return a->seq < b->seq;
+    }
+};
+struct ReadySlot {
+    static void set(chm_sched_task_t* t, std::int32_t i) { t->slot = i; }
+};
+using TimerHeap = IndexedHeap<TimerNode, TimerLess, TimerSlot>;
+using ReadyHeap = IndexedHeap<chm_sched_task_t, ReadyLess, ReadySlot>;
+
+struct Kernel {
+    bool initialised = false;
+    bool running = false;
+    bool stopping = false;
+    int stop_code = 0;
+    chm_kernel_config_t cfg{};
+
+    Tcb* current = nullptr;     // the running task; nullptr = kernel/idle
+    port::Context idle_ctx;     // chm_kernel_run's own context
+    Tcb* zombie = nullptr;      // ended task whose stack is freed after the switch
+
+    // Scheduling.
+    const chm_sched_ops_t* ops = nullptr;
+    void* ops_self = nullptr;
+    chm_sched_policy policy = CHM_SCHED_MUF;
+    std::uint64_t seq = 0;
+    ReadyHeap rq;               // the ready queue of the built-in policies
+
+    // Time.
+    TimerHeap timers;
+    std::uint64_t vnow = 0;           // virtual clock
+    std::uint64_t switched_in_at = 0; // CPU accounting of `current`
+    std::uint64_t quantum_due = 0;    // round robin of `current`
+    std::uint64_t armed_at = 0;       // what the port timer is set to (0 none)
+
+    // Tasks: TCBs live in one reserved array, so an id or a pointer handed
+    // back by a user scheduler is checked in O(1).
+    Tcb* tcbs = nullptr;
+    std::uint32_t tcb_hw = 0;       // slots ever used
+    std::uint32_t alive = 0;
+    std::int32_t free_slot = -1;    // recycled slots, linked through Tcb::next_free
+
+    // Shutdown hooks.
+    struct Hook { void (*fn)(void*); void* arg; };
+    Hook hooks[32];
+    int nhooks = 0;
+
+    // Statistics.
+    std::uint64_t ticks = 0, switches = 0;
+};
+
+extern Kernel g_k;
+
+// ---- time (time/clock.cpp)
+inline std::uint64_t now_locked() {
+    return g_k.cfg.virtual_clock ? g_k.vnow : port::now_ns();
+}
+void timer_add_locked(TimerNode* n, std::uint64_t due);
+void timer_cancel_locked(TimerNode* n);
+// Fire every due timer; returns true when the running task must reschedule.
+bool timers_run_locked(std::uint64_t now);
+// Program the port timer for the earliest of the timer heap and quantum.
+void timer_program_locked(std::uint64_t now);
+std::uint64_t next_due_locked();
+
+// ---- dispatching (core/dispatch.cpp)
+// Make `t` ready (not for the running task). A task that becomes ready goes
+// behind its equals; a preempted one keeps its place (keep_place).
+void make_ready_locked(Tcb* t, bool keep_place = false);
+// Remove `t` from the ready set if it is there.
+void unready_locked(Tcb* t);
+// Run the most urgent task: switch if it is not the current one (or the
+// current one stopped running). Task or kernel context, mask held.
+void schedule_locked();
+// True when the current task should give up the CPU now.
+bool must_switch_locked(std::uint64_t now);
+// Block the current task (state already set); returns its wait_result.
+int block_current_locked();
+// Work owed to the current task in its own context: user signals, deadline
+// handler, aborted cycle. Called with the mask held; releases it around
+// user code.
+void deliver_pending_locked();
+void charge_current_locked(std::uint64_t now);
+
+// ---- tasks (task/*.cpp)
+Tcb* tcb_lookup(chm_tid_t id);
+inline chm_tid_t tid_of(const Tcb* t) { return chm_tid_t(t->index | (std::uint32_t(t->gen) << 16)); }
+// Is `s` the scheduler view of a live TCB? O(1); never dereferences a
+// pointer that is not inside the TCB array.
+bool tcb_view_valid(const chm_sched_task_t* s);
+void task_end_locked(Tcb* t);         // unlink everywhere, mark ended
+void task_free_stack(Tcb* t);         // after the last switch away from it: frees the slot too
+// Entry of every task context: drops the switcher's mask, runs the entry.
+void task_start(void* tcb);
+void release_cycle_locked(Tcb* t, std::uint64_t release);
+void deadline_missed_locked(Tcb* t, std::uint64_t now);
+int stacks_reserve(std::size_t size, unsigned char** lo);
+void stacks_release(unsigned char* lo, std::size_t size, std::size_t dirty);
+bool stack_canary_ok(const Tcb* t);
+std::size_t stack_high_water(const Tcb* t);
+std::size_t stack_round(std::size_t size);
+std::size_t stack_dirty_estimate(const Tcb* t);
+
+// ---- scheduling policies (sched/*.cpp)
+int sched_select(chm_sched_policy policy, const chm_sched_ops_t* user, void* user_arg);
+// Validate what `pick` returned; falls back to MUF on failure. Returns the
+// task to run or nullptr.
+Tcb* sched_pick_locked(std::uint64_t now);
+bool sched_before_locked(Tcb* a, Tcb* b, std::uint64_t now);
+bool sched_reserve(std::size_t tasks);
+
+// ---- wait queues (sync/waitq.cpp)
+void waitq_insert_locked(WaitQueue* q, Tcb* t);
+void waitq_remove_locked(Tcb* t);
+// Wake `t` from whatever it waits on with `result`.
+void wake_locked(Tcb* t, int result);
+
+// A scope holding the interrupt mask.
+struct IrqGuard {
+    IrqGuard() { port::irq_disable(); }
+    ~IrqGuard() { port::irq_restore(); }
+    IrqGuard(const IrqGuard&) = delete;
+    IrqGuard& operator=(const IrqGuard&) = delete;
+};
+
+}  // namespace chm::kernel
+
+#include "core/indexed_heap.inl"

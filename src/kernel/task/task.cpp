@@ -1,0 +1,357 @@
+// Task management: the TCB array, spawn, exit, destroy, suspend, resume,
+// static priority, lookup and status.
+#include <cerrno>
+#include <cstring>
+#include <new>
+#include <sys/mman.h>
+
+#include "kernel.hpp"
+
+namespace chm::kernel {
+
+namespace {
+
+constexpr std::size_t kMinStackBytes = 8 * 1024;
+
+bool tcbs_reserved() {
+    if (g_k.tcbs) return true;
+    // Reserved once; pages are committed as slots are first used.
+    void* m = mmap(nullptr, sizeof(Tcb) * kMaxTasks, PROT_READ | PROT_WRITE,
+                   MAP_PRIVATE | MAP_ANONYMOUS | MAP_NORESERVE, -1, 0);
+    if (m == MAP_FAILED) return false;
+    g_k.tcbs = static_cast<Tcb*>(m);
+    return true;
+}
+
+Tcb* slot_take_locked() {
+    std::uint32_t i;
+    if (g_k.free_slot >= 0) {
+        i = std::uint32_t(g_k.free_slot);
+        g_k.free_slot = g_k.tcbs[i].next_free;
+    } else if (g_k.tcb_hw < kMaxTasks) {
+        i = g_k.tcb_hw++;
+    } else {
+        return nullptr;
+    }
+    Tcb* t = &g_k.tcbs[i];
+    const std::uint16_t gen = t->used || t->gen ? t->gen : 0;
+    new (t) Tcb();
+    t->gen = std::uint16_t(gen + 1 == 0x8000 ? 1 : gen + 1);  // ids stay positive
+    t->index = i;
+    t->used = true;
+    t->tmr.owner = t->dl.owner = t;
+    t->tmr.kind = TimerKind::Wake;
+    t->dl.kind = TimerKind::Deadline;
+    return t;
+}
+
+void slot_give_back_locked(Tcb* t) {
+    t->used = false;
+    t->next_free = g_k.free_slot;
+    g_k.free_slot = std::int32_t(t->index);
+}
+
+int check_attr(const chm_task_attr_t& a, std::size_t* stack) {
+    *stack = a.stack_size ? a.stack_size : g_k.cfg.default_stack;
+    if (*stack < kMinStackBytes) return -EINVAL;
+    if (a.name && std::strlen(a.name) > CHM_TASK_NAME_MAX) return -ENAMETOOLONG;
+    if (a.period_ns) {
+        if (a.deadline_ns > a.period_ns) return -EINVAL;     // deadline beyond period
+        if (a.wcet_ns > (a.deadline_ns ? a.deadline_ns : a.period_ns)) return -EINVAL;
+    } else if (a.deadline_ns || a.start_ns) {
+        return -EINVAL;  // deadlines and releases need a period
+    }
+    return 0;
+}
+
+}  // namespace
+
+Tcb* tcb_lookup(chm_tid_t id) {
+    if (id < 0 || !g_k.tcbs) return nullptr;
+    const std::uint32_t i = std::uint32_t(id) & 0xffff;
+    if (i >= g_k.tcb_hw) return nullptr;
+    Tcb* t = &g_k.tcbs[i];
+    if (!t->used || t->gen != (std::uint32_t(id) >> 16) || t->state == TaskState::Ended) return nullptr;
+    return t;
+}
+
+bool tcb_view_valid(const chm_sched_task_t* s) {
+    const auto p = reinterpret_cast<std::uintptr_t>(s);
+    const auto base = reinterpret_cast<std::uintptr_t>(g_k.tcbs) + offsetof(Tcb, s);
+    if (!g_k.tcbs || p < base) return false;
+    const std::uintptr_t off = p - base;
+    if (off % sizeof(Tcb) != 0 || off / sizeof(Tcb) >= g_k.tcb_hw) return false;
+    const Tcb* t = &g_k.tcbs[off / sizeof(Tcb)];
+    return t->used && t->state != TaskState::Ended;
+}
+
+void task_start(void* p) {
+    Tcb* t = static_cast<Tcb*>(p);
+    errno = 0;
+    if (Tcb* z = g_k.zombie; z && z != t) {
+        g_k.zombie = nullptr;
+        task_free_stack(z);
+    }
+    // The context that switched here held the mask (every switch happens at
+    // nest == 1); it is ours to release, then take what is owed to us.
+    deliver_pending_locked();
+    port::irq_restore();
+    t->entry(t->arg);
+    chm_task_exit();
+}
+
+void release_cycle_locked(Tcb* t, std::uint64_t release) {
+    t->s.release_ns = release;
+    t->s.abs_deadline_ns = release + t->s.deadline_ns;
+    t->s.cycle_cpu_ns = 0;
+    t->awaiting_release = false;
+    t->release_pending = false;
+    timer_add_locked(&t->dl, t->s.abs_deadline_ns);
+    if (g_k.ops->release) g_k.ops->release(g_k.ops_self, &t->s, release);
+}
+
+void deadline_missed_locked(Tcb* t, std::uint64_t now) {
+    ++t->misses;
+    t->missed_cycle = t->cycle;
+    t->missed_deadline = t->s.abs_deadline_ns;
+    if (now - t->s.abs_deadline_ns > t->worst_lateness) t->worst_lateness = now - t->s.abs_deadline_ns;
+    if (t->on_deadline) t->miss_pending = true;
+}
+
+void task_end_locked(Tcb* t) {
+    unready_locked(t);
+    waitq_remove_locked(t);
+    timer_cancel_locked(&t->tmr);
+    timer_cancel_locked(&t->dl);
+    g_k.ops->retire(g_k.ops_self, &t->s);
+    t->state = TaskState::Ended;
+    --g_k.alive;
+}
+
+void task_free_stack(Tcb* t) {
+    stacks_release(t->stack_lo, t->stack_size, stack_dirty_estimate(t));
+    t->stack_lo = nullptr;
+    slot_give_back_locked(t);
+}
+
+}  // namespace chm::kernel
+
+using namespace chm::kernel;
+namespace port = chm::port;
+
+extern "C" {
+
+void chm_task_attr_init(chm_task_attr_t* a) {
+    if (a) *a = chm_task_attr_t{};
+}
+
+int chm_task_spawn(chm_tid_t* out, void (*entry)(void*), void* arg, const chm_task_attr_t* attr) {
+    if (!g_k.initialised) return -EPERM;
+    if (!entry) return -EINVAL;
+    chm_task_attr_t a{};
+    if (attr) a = *attr;
+    std::size_t stack;
+    if (int e = check_attr(a, &stack)) return e;
+    stack = stack_round(stack);
+
+    IrqGuard guard;
+    if (!tcbs_reserved() || !sched_reserve(g_k.alive + 1) || !g_k.timers.reserve(2 * (g_k.alive + 1)))
+        return -ENOMEM;
+    unsigned char* lo;
+    if (int e = stacks_reserve(stack, &lo)) return e;
+    Tcb* t = slot_take_locked();
+    if (!t) {
+        stacks_release(lo, stack, 0);
+        return -EAGAIN;
+    }
+    t->stack_lo = lo;
+    t->stack_size = stack;
+    t->entry = entry;
+    t->arg = arg;
+    std::strcpy(t->name, a.name ? a.name : "task");
+    t->s.id = tid_of(t);
+    t->s.priority = a.priority;
+    t->s.critical = a.critical;
+    t->s.period_ns = a.period_ns;
+    t->s.deadline_ns = a.period_ns ? (a.deadline_ns ? a.deadline_ns : a.period_ns) : 0;
+    t->s.wcet_ns = a.wcet_ns;
+    t->s.abs_deadline_ns = UINT64_MAX;
+    t->s.slot = -1;
+    t->on_deadline = a.on_deadline;
+    t->on_deadline_arg = a.on_deadline_arg;
+    t->handler_priority = a.handler_priority;
+    port::context_init(&t->ctx, lo, stack, task_start, t);
+    if (int e = g_k.ops->admit(g_k.ops_self, &t->s)) {
+        stacks_release(lo, stack, 0);
+        slot_give_back_locked(t);
+        return e < 0 ? e : -EAGAIN;
+    }
+    ++g_k.alive;
+    const std::uint64_t now = now_locked();
+    if (a.period_ns) {
+        const std::uint64_t first = a.start_ns ? a.start_ns : now;
+        t->cycle = 0;
+        if (first > now) {
+            t->state = TaskState::WaitPeriod;
+            t->tmr.kind = TimerKind::Release;
+            timer_add_locked(&t->tmr, first);
+            timer_program_locked(now);
+        } else {
+            release_cycle_locked(t, first);
+            make_ready_locked(t);
+        }
+    } else {
+        make_ready_locked(t);
+    }
+    if (out) *out = tid_of(t);
+    if (g_k.current) {
+        schedule_locked();  // the new task may be more urgent than its parent
+        deliver_pending_locked();
+    }
+    return 0;
+}
+
+void chm_task_exit(void) {
+    port::irq_disable();
+    Tcb* cur = g_k.current;
+    if (!cur) {  // not a task: nothing sensible to end
+        port::irq_restore();
+        return;
+    }
+    task_end_locked(cur);
+    if (g_k.zombie) {  // not yet reaped (we ran without returning from a switch)
+        task_free_stack(g_k.zombie);
+    }
+    g_k.zombie = cur;
+    schedule_locked();
+    __builtin_unreachable();
+}
+
+int chm_task_destroy(chm_tid_t id) {
+    {
+        IrqGuard guard;
+        Tcb* t = tcb_lookup(id);
+        if (!t) return -ESRCH;
+        if (t != g_k.current) {
+            task_end_locked(t);
+            task_free_stack(t);
+            return 0;
+        }
+    }
+    chm_task_exit();
+    return 0;
+}
+
+int chm_task_suspend(chm_tid_t id) {
+    IrqGuard guard;
+    Tcb* t = tcb_lookup(id);
+    if (!t) return -ESRCH;
+    ++t->suspend_count;
+    if (t->state == TaskState::Ready) {
+        unready_locked(t);
+        t->state = TaskState::Suspended;
+    } else if (t->state == TaskState::Running) {
+        t->state = TaskState::Suspended;
+        schedule_locked();
+        deliver_pending_locked();
+    }
+    return 0;
+}
+
+int chm_task_resume(chm_tid_t id) {
+    IrqGuard guard;
+    Tcb* t = tcb_lookup(id);
+    if (!t) return -ESRCH;
+    if (!t->suspend_count) return -EINVAL;
+    if (--t->suspend_count == 0 && t->state == TaskState::Suspended) {
+        make_ready_locked(t);
+        if (g_k.current) {
+            schedule_locked();
+            deliver_pending_locked();
+        }
+    }
+    return 0;
+}
+
+int chm_task_set_priority(chm_tid_t id, int priority) {
+    IrqGuard guard;
+    Tcb* t = tcb_lookup(id);
+    if (!t) return -ESRCH;
+    if (t->boosted) {
+        t->own.priority = priority;  // takes effect when the loan ends
+        return 0;
+    }
+    const bool queued = t->in_ready;
+    if (queued) unready_locked(t);
+    t->s.priority = priority;
+    if (queued) {
+        t->in_ready = true;
+        g_k.ops->enqueue(g_k.ops_self, &t->s, now_locked());
+    }
+    if (t->wq) {  // re-sort it among the waiters
+        WaitQueue* q = t->wq;
+        waitq_remove_locked(t);
+        waitq_insert_locked(q, t);
+    }
+    if (g_k.current) {
+        schedule_locked();
+        deliver_pending_locked();
+    }
+    return 0;
+}
+
+chm_tid_t chm_task_self(void) {
+    Tcb* cur = g_k.current;
+    return cur ? tid_of(cur) : CHM_TID_NONE;
+}
+
+int chm_task_find(const char* name, chm_tid_t* out) {
+    if (!name || !out) return -EINVAL;
+    IrqGuard guard;
+    for (std::uint32_t i = 0; i < g_k.tcb_hw; ++i) {
+        Tcb* t = &g_k.tcbs[i];
+        if (t->used && t->state != TaskState::Ended && std::strcmp(t->name, name) == 0) {
+            *out = tid_of(t);
+            return 0;
+        }
+    }
+    return -ESRCH;
+}
+
+int chm_task_count(void) { return int(g_k.alive); }
+
+int chm_task_status(chm_tid_t id, chm_task_status_t* out) {
+    if (!out) return -EINVAL;
+    IrqGuard guard;
+    Tcb* t = tcb_lookup(id);
+    if (!t) return -ESRCH;
+    if (t == g_k.current) charge_current_locked(now_locked());
+    *out = chm_task_status_t{};
+    out->id = id;
+    std::memcpy(out->name, t->name, sizeof out->name);
+    switch (t->state) {
+    case TaskState::Ready: out->state = CHM_TASK_READY; break;
+    case TaskState::Running: out->state = CHM_TASK_RUNNING; break;
+    case TaskState::Blocked: out->state = CHM_TASK_BLOCKED; break;
+    case TaskState::Suspended: out->state = CHM_TASK_SUSPENDED; break;
+    case TaskState::WaitPeriod: out->state = CHM_TASK_WAITING_PERIOD; break;
+    case TaskState::Paused: out->state = CHM_TASK_PAUSED; break;
+    case TaskState::Ended: out->state = CHM_TASK_ENDED; break;
+    }
+    const chm_sched_task_t& v = t->boosted ? t->own : t->s;
+    out->priority = v.priority;
+    out->critical = (t->s.flags & 1) || t->s.critical;
+    out->period_ns = t->s.period_ns;
+    out->deadline_ns = t->s.deadline_ns;
+    out->wcet_ns = t->s.wcet_ns;
+    out->cpu_ns = t->cpu_ns;
+    out->cycles = t->cycles_done;
+    out->misses = t->misses;
+    out->worst_lateness_ns = t->worst_lateness;
+    out->worst_cycle_cpu_ns = t->worst_cycle_cpu;
+    out->stack_size = t->stack_size;
+    out->stack_high_water = stack_high_water(t);
+    return 0;
+}
+
+}  // extern "C"

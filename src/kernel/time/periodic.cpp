@@ -1,0 +1,117 @@
+// Task timing: yield, pause until a restart time, periodic cycles on an
+// absolute grid (no drift), and locking a task into the CPU.
+#include <cerrno>
+
+#include "kernel.hpp"
+
+namespace chm::kernel {
+
+namespace {
+
+// Block the current task until `until` (Paused) or its next release
+// (WaitPeriod); user signals interrupt the wait.
+int sleep_current_locked(TaskState state, std::uint64_t until, TimerKind kind) {
+    Tcb* cur = g_k.current;
+    cur->state = state;
+    cur->interruptible = true;
+    cur->wait_result = 0;
+    cur->tmr.kind = kind;
+    timer_add_locked(&cur->tmr, until);
+    timer_program_locked(now_locked());
+    const int r = block_current_locked();
+    deliver_pending_locked();
+    return r;
+}
+
+void complete_cycle_locked(Tcb* t, std::uint64_t now) {
+    ++t->cycles_done;
+    if (t->s.cycle_cpu_ns > t->worst_cycle_cpu) t->worst_cycle_cpu = t->s.cycle_cpu_ns;
+    if (t->dl.idx >= 0) {
+        timer_cancel_locked(&t->dl);  // finished in time
+    } else if (now > t->s.abs_deadline_ns && now - t->s.abs_deadline_ns > t->worst_lateness) {
+        t->worst_lateness = now - t->s.abs_deadline_ns;
+    }
+    t->awaiting_release = true;
+}
+
+}  // namespace
+
+}  // namespace chm::kernel
+
+using namespace chm::kernel;
+namespace port = chm::port;
+
+extern "C" {
+
+void chm_task_yield(void) {
+    IrqGuard guard;
+    Tcb* cur = g_k.current;
+    if (!cur) return;
+    charge_current_locked(now_locked());
+    make_ready_locked(cur);  // behind its equals
+    schedule_locked();
+    deliver_pending_locked();
+}
+
+int chm_task_pause_until(uint64_t restart_ns) {
+    IrqGuard guard;
+    if (!g_k.current) return -EPERM;
+    if (restart_ns <= now_locked()) return 0;
+    return sleep_current_locked(TaskState::Paused, restart_ns, TimerKind::Wake);
+}
+
+int chm_task_wait_period(void) {
+    port::irq_disable();
+    Tcb* cur = g_k.current;
+    if (!cur || !cur->s.period_ns) {
+        port::irq_restore();
+        return -EINVAL;
+    }
+    const std::uint64_t now = now_locked();
+    charge_current_locked(now);
+    if (!cur->awaiting_release) complete_cycle_locked(cur, now);
+    int r = 0;
+    if (cur->release_pending) {
+        // The release came while we were away (a signal interrupted the wait).
+        release_cycle_locked(cur, cur->pending_release);
+    } else {
+        const std::uint64_t next = cur->s.release_ns + cur->s.period_ns;
+        if (next <= now && !cur->abort_cycle) {
+            release_cycle_locked(cur, next);  // late: the next cycle is already due
+        } else {
+            r = sleep_current_locked(TaskState::WaitPeriod, next, TimerKind::Release);
+        }
+    }
+    if (r == 0) ++cur->cycle;
+    if (cur->abort_cycle && r == 0) {
+        // Restart the entry from the top, on this same stack: we are deep
+        // below the frames context_init rewrites, and never return to them.
+        cur->abort_cycle = false;
+        port::context_init(&cur->ctx, cur->stack_lo, cur->stack_size, task_start, cur);
+        void* discard;
+        chm_port_switch(&discard, cur->ctx.sp);
+    }
+    port::irq_restore();
+    return r;
+}
+
+void chm_task_lock(void) {
+    IrqGuard guard;
+    if (g_k.current) ++g_k.current->lock_nest;
+}
+
+void chm_task_unlock(void) {
+    IrqGuard guard;
+    Tcb* cur = g_k.current;
+    if (!cur || !cur->lock_nest) return;
+    if (--cur->lock_nest == 0) {
+        // Ticks were counted while locked; act on them now.
+        const std::uint64_t now = now_locked();
+        timers_run_locked(now);
+        timer_program_locked(now);
+        schedule_locked();
+        deliver_pending_locked();
+    }
+}
+
+}  // extern "C"
