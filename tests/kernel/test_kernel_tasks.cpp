@@ -1,0 +1,205 @@
+// Tasks on the virtual clock: lifecycle, round robin, suspend/resume,
+// priorities, lookup, status and the bad-input rules.
+#include <cerrno>
+#include <cstring>
+
+#include "kernel_fixture.hpp"
+
+namespace chm::test {
+namespace {
+
+std::vector<Event> g_trace;
+
+void note(const char* who) { g_trace.push_back({chm_time_now(), who}); }
+
+class Tasks : public KernelTest {
+protected:
+    void SetUp() override { g_trace.clear(); }
+};
+
+void say_and_end(void* name) { note(static_cast<const char*>(name)); }
+
+TEST_F(Tasks, MoreUrgentFirstThenRunEndsWhenAllTasksEnd) {
+    start(CHM_SCHED_FIXED);
+    spawn(say_and_end, (void*)"low", "low", 1);
+    spawn(say_and_end, (void*)"high", "high", 5);
+    spawn(say_and_end, (void*)"mid", "mid", 3);
+    EXPECT_EQ(chm_task_count(), 3);
+    EXPECT_EQ(chm_kernel_run(), 0);
+    EXPECT_EQ(chm_task_count(), 0);
+    std::vector<Event> want{{0, "high"}, {0, "mid"}, {0, "low"}};
+    EXPECT_EQ(g_trace, want);
+}
+
+void yielder(void* name) {
+    for (int i = 0; i < 3; ++i) {
+        note(static_cast<const char*>(name));
+        chm_task_yield();
+    }
+}
+
+TEST_F(Tasks, YieldRotatesAmongEquals) {
+    start(CHM_SCHED_FIXED);
+    spawn(yielder, (void*)"a", "a", 2);
+    spawn(yielder, (void*)"b", "b", 2);
+    spawn(yielder, (void*)"c", "c", 2);
+    ASSERT_EQ(chm_kernel_run(), 0);
+    std::string order;
+    for (auto& e : g_trace) order += e.who;
+    EXPECT_EQ(order, "abcabcabc");
+}
+
+void worker_1ms_x5(void* name) {
+    for (int i = 0; i < 5; ++i) {
+        note(static_cast<const char*>(name));
+        chm_time_consume(kMs);
+    }
+}
+
+TEST_F(Tasks, QuantumSharesTheCpuRoundRobinOnTheVirtualClock) {
+    start(CHM_SCHED_FIXED, true, 2 * kMs);
+    spawn(worker_1ms_x5, (void*)"a", "a", 1);
+    spawn(worker_1ms_x5, (void*)"b", "b", 1);
+    ASSERT_EQ(chm_kernel_run(), 0);
+    std::vector<Event> want{{0, "a"}, {1 * kMs, "a"}, {2 * kMs, "b"}, {3 * kMs, "b"},
+                            {4 * kMs, "a"}, {5 * kMs, "a"}, {6 * kMs, "b"}, {7 * kMs, "b"},
+                            {8 * kMs, "a"}, {9 * kMs, "b"}};
+    EXPECT_EQ(g_trace, want);
+}
+
+chm_tid_t g_victim;
+void victim(void*) {
+    for (int i = 0; i < 4; ++i) {
+        note("victim");
+        chm_time_consume(kMs);
+    }
+}
+void controller(void*) {
+    chm_time_consume(kMs);  // victim is lower: it has not run yet
+    note("suspend");
+    EXPECT_EQ(chm_task_suspend(g_victim), 0);
+    EXPECT_EQ(chm_task_pause_until(5 * kMs), 0);
+    chm_task_status_t st;
+    ASSERT_EQ(chm_task_status(g_victim, &st), 0);
+    EXPECT_EQ(st.state, CHM_TASK_SUSPENDED);
+    note("resume");
+    EXPECT_EQ(chm_task_resume(g_victim), 0);
+    EXPECT_EQ(chm_task_resume(g_victim), -EINVAL);
+}
+
+TEST_F(Tasks, SuspendedTaskDoesNotRunUntilResumed) {
+    start(CHM_SCHED_FIXED);
+    g_victim = spawn(victim, nullptr, "victim", 1);
+    spawn(controller, nullptr, "controller", 9);
+    ASSERT_EQ(chm_kernel_run(), 0);
+    std::vector<Event> want{{1 * kMs, "suspend"}, {5 * kMs, "resume"}, {5 * kMs, "victim"},
+                            {6 * kMs, "victim"}, {7 * kMs, "victim"}, {8 * kMs, "victim"}};
+    EXPECT_EQ(g_trace, want);
+}
+
+chm_tid_t g_a, g_b;
+void raiser(void*) {
+    note("raiser");
+    EXPECT_EQ(chm_task_set_priority(g_b, 10), 0);  // b now preempts us
+    note("raiser-after");
+}
+void plain(void* name) { note(static_cast<const char*>(name)); }
+
+TEST_F(Tasks, RaisingAPriorityPreemptsAtOnce) {
+    start(CHM_SCHED_FIXED);
+    g_a = spawn(raiser, nullptr, "raiser", 5);
+    g_b = spawn(plain, (void*)"b", "b", 1);
+    ASSERT_EQ(chm_kernel_run(), 0);
+    std::string order;
+    for (auto& e : g_trace) order += e.who + " ";
+    EXPECT_EQ(order, "raiser b raiser-after ");
+}
+
+void finder(void*) {
+    chm_tid_t me = chm_task_self(), found;
+    ASSERT_EQ(chm_task_find("finder", &found), 0);
+    EXPECT_EQ(found, me);
+    EXPECT_EQ(chm_task_find("nobody", &found), -ESRCH);
+    char big[4096];
+    std::memset(big, 1, sizeof big);  // dirties at least 4 KiB of stack
+    asm volatile("" : : "r"(big) : "memory");
+    chm_time_consume(3 * kMs);
+    chm_task_status_t st;
+    ASSERT_EQ(chm_task_status(me, &st), 0);
+    EXPECT_STREQ(st.name, "finder");
+    EXPECT_EQ(st.state, CHM_TASK_RUNNING);
+    EXPECT_EQ(st.cpu_ns, 3 * kMs);
+    EXPECT_GE(st.stack_high_water, 4096u);
+    EXPECT_LT(st.stack_high_water, st.stack_size);
+}
+
+TEST_F(Tasks, FindByNameAndStatusSnapshot) {
+    start(CHM_SCHED_MUF);
+    chm_tid_t id = spawn(finder, nullptr, "finder");
+    ASSERT_EQ(chm_kernel_run(), 0);
+    chm_task_status_t st;
+    EXPECT_EQ(chm_task_status(id, &st), -ESRCH) << "ended tasks' ids go stale";
+}
+
+void nop(void*) {}
+
+TEST_F(Tasks, BadAttributesAreRefusedAndLeaveNothingBehind) {
+    start(CHM_SCHED_MUF);
+    chm_task_attr_t a;
+    chm_tid_t id;
+    chm_task_attr_init(&a);
+    EXPECT_EQ(chm_task_spawn(&id, nullptr, nullptr, &a), -EINVAL);
+    a.stack_size = 1024;
+    EXPECT_EQ(chm_task_spawn(&id, nop, nullptr, &a), -EINVAL) << "stack too small";
+    chm_task_attr_init(&a);
+    a.period_ns = 10 * kMs;
+    a.deadline_ns = 20 * kMs;
+    EXPECT_EQ(chm_task_spawn(&id, nop, nullptr, &a), -EINVAL) << "deadline beyond period";
+    chm_task_attr_init(&a);
+    a.period_ns = 10 * kMs;
+    a.wcet_ns = 11 * kMs;
+    EXPECT_EQ(chm_task_spawn(&id, nop, nullptr, &a), -EINVAL) << "wcet beyond deadline";
+    chm_task_attr_init(&a);
+    a.deadline_ns = 5 * kMs;
+    EXPECT_EQ(chm_task_spawn(&id, nop, nullptr, &a), -EINVAL) << "deadline without a period";
+    chm_task_attr_init(&a);
+    a.name = "a-name-that-is-far-too-long-for-a-task-name";
+    EXPECT_EQ(chm_task_spawn(&id, nop, nullptr, &a), -ENAMETOOLONG);
+    EXPECT_EQ(chm_task_count(), 0);
+    EXPECT_EQ(chm_task_destroy(12345), -ESRCH);
+    EXPECT_EQ(chm_task_suspend(-7), -ESRCH);
+    EXPECT_EQ(chm_task_set_priority(99, 1), -ESRCH);
+    EXPECT_EQ(chm_kernel_run(), 0);
+}
+
+TEST(KernelInit, SchedulerTableWithMissingOperationsIsRefused) {
+    chm_sched_ops_t ops{};
+    ops.name = "half";
+    chm_kernel_config_t cfg;
+    chm_kernel_config_init(&cfg);
+    cfg.policy = CHM_SCHED_USER;
+    cfg.user_sched = &ops;
+    cfg.virtual_clock = 1;
+    EXPECT_EQ(chm_kernel_init(&cfg), -EINVAL);
+    cfg.policy = CHM_SCHED_MUF;
+    cfg.quantum_ns = 5;  // below 10 µs
+    EXPECT_EQ(chm_kernel_init(&cfg), -EINVAL);
+    EXPECT_EQ(chm_task_spawn(nullptr, nop, nullptr, nullptr), -EPERM) << "not initialised";
+}
+
+void spawner(void*) {
+    for (int i = 0; i < 1000; ++i) {
+        chm_tid_t id;
+        ASSERT_EQ(chm_task_spawn(&id, nop, nullptr, nullptr), 0);
+        ASSERT_EQ(chm_task_destroy(id), 0);
+    }
+}
+
+TEST_F(Tasks, SpawnDestroyCyclesReuseSlotsAndStacks) {
+    start(CHM_SCHED_FIXED);
+    spawn(spawner, nullptr, "spawner", 5);
+    ASSERT_EQ(chm_kernel_run(), 0);
+}
+
+}  // namespace
+}  // namespace chm::test
