@@ -1,0 +1,81 @@
+// The public C API of include/chimera/mem.h: errno and argument handling
+// over the process heap (heap.hpp).
+#include "chimera/mem.h"
+
+#include <cerrno>
+#include <cstring>
+
+#include "kernel/mem/heap.hpp"
+
+using namespace chm::mem;
+
+extern "C" {
+
+void* chm_malloc(size_t size) {
+    void* p = heap_allocate(size);
+    if (!p)
+        errno = ENOMEM;
+    return p;
+}
+
+void* chm_calloc(size_t n, size_t size) {
+    size_t bytes = 0;
+    if (__builtin_mul_overflow(n, size, &bytes)) {
+        errno = ENOMEM;
+        return nullptr;
+    }
+    void* p = heap_allocate(bytes);
+    if (!p) {
+        errno = ENOMEM;
+        return nullptr;
+    }
+    // Freed blocks are reused as they are, so zero every time.
+    std::memset(p, 0, bytes);
+    return p;
+}
+
+void* chm_realloc(void* p, size_t size) {
+    bool bad = false;
+    void* q = heap_reallocate(p, size, &bad);
+    if (!q && bad)
+        errno = EINVAL;
+    else if (!q && size != 0)
+        errno = ENOMEM;
+    return q;
+}
+
+void chm_free(void* p) { heap_free(p); }
+
+void* chm_memalign(size_t align, size_t size) {
+    if (align == 0 || (align & (align - 1))) {
+        errno = EINVAL;
+        return nullptr;
+    }
+    void* p = heap_allocate_aligned(align, size);
+    if (!p)
+        errno = ENOMEM;
+    return p;
+}
+
+size_t chm_malloc_usable_size(void* p) { return heap_usable_size(p); }
+
+int chm_mem_check(void) { return heap_check() ? 0 : -EFAULT; }
+
+int chm_mem_stats(struct chm_mem_stats* out) {
+    if (!out)
+        return -EINVAL;
+    const HeapStats s = heap_stats();
+    out->reserved_bytes = s.reserved_bytes;
+    out->committed_bytes = s.committed_bytes;
+    out->used_bytes = s.tlsf.used_bytes;
+    out->free_bytes = s.tlsf.free_bytes;
+    out->overhead_bytes = s.tlsf.overhead_bytes;
+    out->largest_free = s.tlsf.largest_free;
+    out->used_blocks = s.tlsf.used_blocks;
+    out->free_blocks = s.tlsf.free_blocks;
+    out->commits = s.commits;
+    out->invalid_frees = s.tlsf.invalid_frees + s.foreign_frees;
+    return 0;
+}
+
+}  // extern "C"
