@@ -106,7 +106,9 @@ void release_cycle_locked(Tcb* t, std::uint64_t release) {
     t->s.cycle_cpu_ns = 0;
     t->awaiting_release = false;
     t->release_pending = false;
-    timer_add_locked(&t->dl, t->s.abs_deadline_ns);
+    // A cycle that completes exactly at its deadline is on time: the miss
+    // fires only once the deadline has passed.
+    timer_add_locked(&t->dl, t->s.abs_deadline_ns + 1);
     if (g_k.ops->release) g_k.ops->release(g_k.ops_self, &t->s, release);
 }
 
