@@ -13,6 +13,7 @@
 #include <thread>
 #include <unistd.h>
 
+#include "chimera/mem.h"
 #include "kernel_fixture.hpp"
 #include "port.hpp"
 
@@ -243,6 +244,10 @@ TEST_F(RealTime, CLibraryIsSafeUnderPreemption) {
     EXPECT_EQ(bad, 0) << "torn or out-of-order lines";
     for (int i = 0; i < kStressTasks; ++i) EXPECT_EQ(seen[i], g_lines[i]) << "task " << i;
     EXPECT_GT(total, kStressTasks * 10);
+    EXPECT_EQ(chm_mem_check(), 0) << "the allocator's own consistency walk";
+    struct chm_mem_stats st;
+    ASSERT_EQ(chm_mem_stats(&st), 0);
+    EXPECT_GT(st.used_blocks + st.free_blocks, 0u) << "malloc was served by the Chimera heap";
 }
 
 }  // namespace

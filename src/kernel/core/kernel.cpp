@@ -5,6 +5,7 @@
 #include <sys/mman.h>
 
 #include "kernel.hpp"
+#include "kernel/mem/heap.hpp"
 
 namespace chm::kernel {
 
@@ -12,6 +13,15 @@ void dispatch_install_hooks();
 port::TickHandler dispatch_tick_handler();
 
 namespace {
+
+// The heap serves every thread; on the kernel thread its lock is also held
+// under the interrupt mask, so no task is ever preempted holding it.
+void heap_enter() {
+    if (port::on_kernel_thread()) port::irq_disable();
+}
+void heap_leave() {
+    if (port::on_kernel_thread()) port::irq_restore();
+}
 
 void run_shutdown_hooks() {
     while (g_k.nhooks > 0) {
@@ -82,6 +92,7 @@ int chm_kernel_init(const chm_kernel_config_t* cfg) {
     if (!c.virtual_clock) {
         dispatch_install_hooks();
         if (int e = port::timer_init(dispatch_tick_handler())) return e;
+        chm_heap_set_lock_hooks(heap_enter, heap_leave);
     } else {
         port::irq_set_pending_hook(nullptr);
     }
@@ -140,7 +151,10 @@ void chm_kernel_fini(void) {
     }
     g_k.zombie = nullptr;
     port::irq_restore();
-    if (!g_k.cfg.virtual_clock) port::timer_fini();
+    if (!g_k.cfg.virtual_clock) {
+        chm_heap_set_lock_hooks(nullptr, nullptr);
+        port::timer_fini();
+    }
     port::irq_set_pending_hook(nullptr);
     port::chm_port_preempt_hook = nullptr;
     // Keep the reserved TCB array and the heaps' storage for a next init;

@@ -145,6 +145,9 @@ void timer_fini();
 // The timer signal number (a real-time signal).
 int timer_signal();
 
+// True on the thread that called timer_init (the kernel thread). Any context.
+bool on_kernel_thread();
+
 // Number of timer signals that reached a thread other than the kernel thread
 // (they are ignored; a test proves this stays zero).
 std::uint64_t stray_signal_count();

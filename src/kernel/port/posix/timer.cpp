@@ -77,6 +77,8 @@ void on_timer(int, siginfo_t*, void* ucontext) {
 
 int timer_signal() { return SIGRTMIN + 2; }
 
+bool on_kernel_thread() { return t_kernel_thread; }
+
 std::uint64_t deferred_preemption_count() { return g_deferred; }
 
 std::uint64_t stray_signal_count() { return __atomic_load_n(&g_stray, __ATOMIC_RELAXED); }
