@@ -95,6 +95,11 @@ int chm_task_pause_until(uint64_t restart_ns);
  * an aperiodic task. */
 int chm_task_wait_period(void);
 
+/* Release time of the calling periodic task's current cycle (absolute, on
+ * the grid), or 0 outside a periodic task. Release lateness is
+ * chm_time_now() - chm_task_cycle_release() at the start of a cycle. */
+uint64_t chm_task_cycle_release(void);
+
 /* Lock the calling task into the CPU (no preemption; timers still counted)
  * and unlock; nestable. Blocking while locked unlocks for the wait. */
 void chm_task_lock(void);

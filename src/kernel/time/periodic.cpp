@@ -95,6 +95,11 @@ int chm_task_wait_period(void) {
     return r;
 }
 
+uint64_t chm_task_cycle_release(void) {
+    Tcb* cur = g_k.current;
+    return cur && cur->s.period_ns ? cur->s.release_ns : 0;
+}
+
 void chm_task_lock(void) {
     IrqGuard guard;
     if (g_k.current) ++g_k.current->lock_nest;
