@@ -21,12 +21,13 @@ bool g_timer_live = false;
 TickHandler g_tick = nullptr;
 void* g_altstack = nullptr;
 constexpr std::size_t kAltStackSize = 64 * 1024;
-std::uint64_t g_stray = 0;
+// 32-bit: 64-bit atomics take a lock on m68k, never in a signal handler.
+std::uint32_t g_stray = 0;
 
 // initial-exec: no lazy TLS allocation inside the handler.
 __attribute__((tls_model("initial-exec"))) thread_local bool t_kernel_thread = false;
 
-std::uint64_t g_deferred = 0;
+std::uint32_t g_deferred = 0;
 unsigned g_defer_streak = 0;  // consecutive deferrals: backs the retry off
 
 void on_timer(int, siginfo_t*, void* ucontext) {
