@@ -1,0 +1,204 @@
+// Every row of the report, in report order: Chimera's own rows first (the
+// Chimera II paper's Table 1, then the PERF.md target rows, then the rows the
+// port provides today), then the peers, each rt-tests row beside the suite's
+// matching peer. A Chimera row names the peer a user would otherwise pick;
+// its measurement must use the same pinning as that peer (stated in both
+// rows' config). Paper figures are the 25 MHz 68030 of 1991, in ns.
+#include "catalog.hpp"
+
+
+#include "harness.hpp"  // kNull
+
+namespace chm::bench {
+namespace {
+
+constexpr double us = 1000.0;
+constexpr Target none{};
+constexpr Target ratio_le(double b) { return {Target::kRatioAtMost, b}; }
+
+constexpr RowInfo kRows[] = {
+    // ---- available today: the port layer
+    {"port_switch", "ns", "peer_fiber_switch", kNull, ratio_le(1.5),
+     "chm_port_switch between two contexts (callee-saved regs + MXCSR/x87 CW); one switch"},
+
+    // ---- Chimera II Table 1: task management
+    {"task_create", "ns", "peer_pthread_create_join", 220 * us, none,
+     "spawn a task with default arguments"},
+    {"task_destroy", "ns", "peer_pthread_create_join", 99 * us, none, "destroy a task"},
+    {"task_set_priority", "ns", "peer_setschedparam", 20 * us, none,
+     "change a task's static priority, queues rearranged"},
+    {"timer_resched_noswitch", "ns", "peer_signal_self", 28 * us, ratio_le(1.5),
+     "timer-driven reschedule, the running task stays"},
+    {"context_switch_fpu", "ns", "peer_fiber_switch", 66 * us, none,
+     "kernel task-to-task switch including FP state"},
+    {"timer_resched_switch", "ns", "peer_thread_sem_pingpong_same_core", 94 * us, none,
+     "timer-driven reschedule with a context switch"},
+    {"resource_contention_resched", "ns", "peer_thread_sem_pingpong_same_core", 82 * us, none,
+     "a task blocks on a resource, the next one runs"},
+    {"tick_cpu_locked", "ns", "peer_signal_self", 6 * us, none,
+     "timer tick with the CPU locked, no reschedule"},
+    // ---- Table 1: local semaphores
+    {"local_p_noblock", "ns", "peer_sem_wait", 7 * us, none, "P() that does not block"},
+    {"local_p_block", "ns", "peer_thread_sem_pingpong_same_core", 89 * us, none,
+     "P() that blocks, until the next task runs"},
+    {"local_v_nowake", "ns", "peer_sem_post", 7 * us, none, "V() with nobody waiting"},
+    {"local_v_wake", "ns", "peer_thread_sem_pingpong_same_core", 34 * us, none,
+     "V() that wakes a blocked task"},
+    // ---- Table 1: remote semaphores
+    {"remote_semp_noblock", "ns", "peer_sem_wait", 27 * us, none, "remote semP() that does not block"},
+    {"remote_semp_block", "ns", "peer_named_sem_pingpong_same_core", 109 * us, none,
+     "remote semP() that blocks, with the contention reschedule"},
+    {"remote_semv_nowake", "ns", "peer_sem_post", 26 * us, none, "remote semV() with nobody waiting"},
+    {"remote_semv_wake_local", "ns", "peer_thread_sem_pingpong_same_core", 64 * us, none,
+     "remote semV() waking a task on the caller's RTPU"},
+    {"remote_semv_wake_remote", "ns", "peer_futex_pingpong_xcore", 100 * us, none,
+     "remote semV() waking a task on another RTPU"},
+    // ---- Table 1: priority message passing
+    {"msg_put_24b_local", "ns", "peer_bipc_mq_send_24b", 62 * us, none,
+     "put a 24-byte message, queue in local memory"},
+    {"msg_put_24b_remote", "ns", "peer_bipc_mq_send_24b", 79 * us, none,
+     "put a 24-byte message, queue in remote memory"},
+    {"msg_get_24b_local", "ns", "peer_bipc_mq_receive_24b", 64 * us, none,
+     "get a 24-byte message, queue in local memory"},
+    {"msg_get_24b_remote", "ns", "peer_bipc_mq_receive_24b", 81 * us, none,
+     "get a 24-byte message, queue in remote memory"},
+    // ---- Table 1: global shared memory. Value: ns per 8-byte word through an
+    // attached segment minus the same code on a local array; ratio relative.
+    {"shm_read_overhead", "ns", "peer_array_read", 0, {Target::kRatioAtMost, 0.05},
+     "extra ns per 8-byte read through attached global shared memory"},
+    {"shm_write_overhead", "ns", "peer_array_write", 0, {Target::kRatioAtMost, 0.05},
+     "extra ns per 8-byte write through attached global shared memory"},
+
+    // ---- PERF.md targets (issue 6 item 7)
+    {"yield_switch", "ns", "peer_fiber_switch", kNull, ratio_le(3),
+     "yield to an equal-priority task through the scheduler"},
+    {"sem_v_wake_switch", "ns", "peer_fiber_switch", kNull, ratio_le(5),
+     "V waking a higher-priority task, including the switch"},
+    {"local_pv_noblock", "ns", "peer_sem_wait_post", 14 * us, ratio_le(1),
+     "uncontended local P+V (paper: 7 + 7)"},
+    {"task_spawn_destroy", "ns", "peer_pthread_create_join", 319 * us, ratio_le(0.01),
+     "spawn + destroy a task (paper: 220 + 99); target 100x faster than pthreads"},
+    {"sched_ops_10k_over_10", "x", nullptr, kNull, {Target::kValueAtMost, 2},
+     "scheduler operations with 10,000 tasks over their cost with 10"},
+    {"release_lateness_p99_20tasks", "ns", "peer_sigwait_1khz_lateness_p99", kNull, ratio_le(1.2),
+     "1 kHz release lateness p99, 20 periodic tasks on one RTPU"},
+    {"msgq_putget_24b_xrtpu", "ns", "peer_bipc_mq_24b_one_thread", 160 * us, ratio_le(1.5),
+     "cross-RTPU 24-byte put+get, no wait (paper: 79 + 81)"},
+    {"msgq_wake_rt2", "ns", "peer_posix_mq_24b_rt2_same_core", kNull, ratio_le(0.8),
+     "cross-RTPU 24-byte message that wakes the receiver, RT/2"},
+    {"rsem_handoff_sleeping", "ns", "peer_futex_pingpong_same_core", kNull, ratio_le(1.1),
+     "remote semaphore hand-off to a sleeping RTPU, RT/2"},
+    {"rsem_handoff_polling", "ns", "peer_cacheline_pingpong_xcore", kNull, ratio_le(3),
+     "remote semaphore hand-off to a polling RTPU, RT/2"},
+    {"idle_rtpu_cpu", "%", nullptr, kNull, {Target::kValueBelow, 1}, "CPU used by an idle RTPU"},
+    // ---- predictability (issue 6 item 4)
+    {"release_lateness_p99_1task", "ns", "peer_sigwait_1khz_lateness_p99", kNull, none,
+     "1 kHz release lateness p99, 1 periodic task"},
+    {"release_lateness_p99_200tasks", "ns", "peer_sigwait_1khz_lateness_p99", kNull, none,
+     "1 kHz release lateness p99, 200 periodic tasks"},
+    {"control_cpu_share_1khz", "%", nullptr, 90, {Target::kValueAtLeast, 90},
+     "CPU share left to control tasks running at 1000 Hz (paper: over 90 %)"},
+
+    // ---- peers: user-space switching
+    {"peer_fiber_switch", "ns", nullptr, kNull, none, "Boost.Context fiber resume; one switch"},
+    {"peer_ucontext_switch", "ns", nullptr, kNull, none, "swapcontext; one switch"},
+    {"peer_fiber_create_destroy", "ns", nullptr, kNull, none,
+     "Boost.Context fiber created, run to its end, destroyed (pooled 64 KiB stacks)"},
+    // ---- peers: threads and their synchronisation
+    {"peer_pthread_create_join", "ns", nullptr, kNull, none,
+     "pthread_create of an empty thread + pthread_join"},
+    {"peer_sem_wait_post", "ns", nullptr, kNull, none, "uncontended sem_wait + sem_post"},
+    {"peer_sem_wait", "ns", nullptr, kNull, none, "uncontended sem_wait on a positive count"},
+    {"peer_sem_post", "ns", nullptr, kNull, none, "sem_post with nobody waiting"},
+    {"peer_mutex_lock_unlock", "ns", nullptr, kNull, none, "uncontended pthread_mutex lock + unlock"},
+    {"peer_setschedparam", "ns", nullptr, kNull, none,
+     "pthread_setschedparam of the calling thread (a system call)"},
+    {"peer_thread_sem_pingpong_same_core", "ns", nullptr, kNull, none,
+     "two threads on one core hand a sem_t back and forth; RT/2"},
+    {"peer_rt_ptsematest_same_core", "ns", nullptr, kNull, none,
+     "rt-tests ptsematest: mutex hand-off latency between threads, one core"},
+    {"peer_rt_ptsematest_xcore", "ns", nullptr, kNull, none,
+     "rt-tests ptsematest: mutex hand-off latency between threads, across cores"},
+    // ---- peers: waking another process
+    {"peer_futex_pingpong_same_core", "ns", nullptr, kNull, none,
+     "raw shared futex ping-pong between two processes on one core; RT/2"},
+    {"peer_futex_pingpong_xcore", "ns", nullptr, kNull, none,
+     "raw shared futex ping-pong between two processes across cores; RT/2"},
+    {"peer_named_sem_pingpong_same_core", "ns", nullptr, kNull, none,
+     "POSIX named semaphore ping-pong between two processes on one core; RT/2"},
+    {"peer_named_sem_pingpong_xcore", "ns", nullptr, kNull, none,
+     "POSIX named semaphore ping-pong between two processes across cores; RT/2"},
+    {"peer_rt_svsematest_same_core", "ns", nullptr, kNull, none,
+     "rt-tests svsematest -f: SysV semaphore wake latency between processes, one core"},
+    {"peer_rt_svsematest_xcore", "ns", nullptr, kNull, none,
+     "rt-tests svsematest -f: SysV semaphore wake latency between processes, across cores"},
+    {"peer_pipe_pingpong_same_core", "ns", nullptr, kNull, none,
+     "1-byte pipe ping-pong between two processes on one core; RT/2"},
+    {"peer_pipe_pingpong_xcore", "ns", nullptr, kNull, none,
+     "1-byte pipe ping-pong between two processes across cores; RT/2"},
+    {"peer_cacheline_pingpong_xcore", "ns", nullptr, kNull, none,
+     "two spinning threads on two cores pass a cache line; one hand-off (the floor)"},
+    // ---- peers: messages
+    {"peer_posix_mq_24b_rt2_same_core", "ns", nullptr, kNull, none,
+     "POSIX mq 24-byte round trip between two processes on one core; RT/2"},
+    {"peer_posix_mq_24b_rt2_xcore", "ns", nullptr, kNull, none,
+     "POSIX mq 24-byte round trip between two processes across cores; RT/2"},
+    {"peer_rt_pmqtest_same_core", "ns", nullptr, kNull, none,
+     "rt-tests pmqtest: POSIX mq wake latency between threads, one core"},
+    {"peer_rt_pmqtest_xcore", "ns", nullptr, kNull, none,
+     "rt-tests pmqtest: POSIX mq wake latency between threads, across cores"},
+    {"peer_posix_mq_24b_one_thread", "ns", nullptr, kNull, none,
+     "POSIX mq 24-byte mq_send + mq_receive in one thread"},
+    {"peer_bipc_mq_24b_one_thread", "ns", nullptr, kNull, none,
+     "Boost.Interprocess message_queue 24-byte send + receive in one thread"},
+    {"peer_bipc_mq_send_24b", "ns", nullptr, kNull, none,
+     "Boost.Interprocess message_queue 24-byte send alone (queue not full)"},
+    {"peer_bipc_mq_receive_24b", "ns", nullptr, kNull, none,
+     "Boost.Interprocess message_queue 24-byte receive alone (queue not empty)"},
+    {"peer_bipc_mq_24b_rt2_same_core", "ns", nullptr, kNull, none,
+     "Boost.Interprocess message_queue 24-byte round trip, two processes, one core; RT/2"},
+    {"peer_bipc_mq_24b_rt2_xcore", "ns", nullptr, kNull, none,
+     "Boost.Interprocess message_queue 24-byte round trip, two processes, across cores; RT/2"},
+    // ---- peers: memory
+    {"peer_mmap_stack_64k_untouched", "ns", nullptr, kNull, none,
+     "mmap + munmap of a 64 KiB stack, never touched"},
+    {"peer_mmap_stack_64k_touched", "ns", nullptr, kNull, none,
+     "mmap + munmap of a 64 KiB stack, its top page touched"},
+    {"peer_array_read", "ns", nullptr, kNull, none, "sum of a 64 KiB local array, per 8-byte word"},
+    {"peer_array_write", "ns", nullptr, kNull, none, "fill of a 64 KiB local array, per 8-byte word"},
+    // ---- peers: timers and signals
+    {"peer_timer_settime", "ns", nullptr, kNull, none, "timer_settime re-arming a POSIX timer"},
+    {"peer_signal_self", "ns", nullptr, kNull, none,
+     "tgkill to the calling thread, handler runs, returns"},
+    {"peer_rt_sigwaittest_same_core", "ns", nullptr, kNull, none,
+     "rt-tests sigwaittest -f: signal wake latency between processes, one core"},
+    {"peer_rt_sigwaittest_xcore", "ns", nullptr, kNull, none,
+     "rt-tests sigwaittest -f: signal wake latency between processes, across cores"},
+    {"peer_sigwait_1khz_lateness_p50", "ns", nullptr, kNull, none,
+     "timer_create + sigwaitinfo 1 kHz loop: release lateness, median"},
+    {"peer_sigwait_1khz_lateness_p99", "ns", nullptr, kNull, none,
+     "timer_create + sigwaitinfo 1 kHz loop: release lateness, 99th percentile"},
+    {"peer_sigwait_1khz_lateness_p999", "ns", nullptr, kNull, none,
+     "timer_create + sigwaitinfo 1 kHz loop: release lateness, 99.9th percentile"},
+    {"peer_sigwait_1khz_lateness_max", "ns", nullptr, kNull, none,
+     "timer_create + sigwaitinfo 1 kHz loop: release lateness, maximum"},
+    {"peer_rt_cyclictest_1khz", "ns", nullptr, kNull, none,
+     "rt-tests cyclictest: clock_nanosleep 1 kHz wake-up latency"},
+};
+
+}  // namespace
+
+std::span<const RowInfo> catalog() { return kRows; }
+
+std::size_t row_index(std::string_view name) {
+    for (std::size_t i = 0; i < std::size(kRows); ++i)
+        if (name == kRows[i].name) return i;
+    return std::size(kRows);
+}
+
+const RowInfo* find_row(std::string_view name) {
+    const std::size_t i = row_index(name);
+    return i < std::size(kRows) ? &kRows[i] : nullptr;
+}
+
+}  // namespace chm::bench
