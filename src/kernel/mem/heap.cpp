@@ -140,8 +140,8 @@ void prefault(char* at, std::size_t bytes) {
 }
 
 // Commit at least `bytes` more (whole chunks, or what is left of the
-// reservation) and give them to the allocator. Lock held.
-bool commit_locked(std::size_t bytes) {
+// reservation) and give them to the allocator. Heap lock held.
+bool commit_chunks(std::size_t bytes) {
     Heap& h = g_heap;
     const std::size_t done = h.committed.load(std::memory_order_relaxed);
     const std::size_t left = h.reserved - done;
@@ -165,8 +165,8 @@ bool commit_locked(std::size_t bytes) {
     return true;
 }
 
-// Reserve and commit the first chunk on first use. Lock held.
-bool ready_locked() {
+// Reserve and commit the first chunk on first use. Heap lock held.
+bool ensure_ready() {
     Heap& h = g_heap;
     if (h.base.load(std::memory_order_relaxed))
         return true;
@@ -189,7 +189,7 @@ bool ready_locked() {
     }
     h.reserved = want;
     h.base.store(reinterpret_cast<std::uintptr_t>(p), std::memory_order_release);
-    if (!commit_locked(kHeapChunk)) {
+    if (!commit_chunks(kHeapChunk)) {
         h.init_failed = true;  // base stays set: heap_owns() is harmless
         return false;
     }
@@ -199,14 +199,16 @@ bool ready_locked() {
 // Commit enough that an allocation of `size` bytes aligned to `align` finds
 // a block: the new chunk joins the free tail, and a block of this size is on
 // a list every block of which fits (TLSF rounds the request up by 1/32).
-bool grow_locked(std::size_t size, std::size_t align) {
+// Heap lock held.
+bool grow_for(std::size_t size, std::size_t align) {
     if (size > Tlsf::kMaxRequest || align > Tlsf::kMaxRequest)
         return false;
     const std::size_t need = size + (size >> Tlsf::kSlLog2) + align + 4 * Tlsf::kMinBlock;
-    return commit_locked(need);
+    return commit_chunks(need);
 }
 
 // A pointer the allocator may inspect without leaving committed memory.
+// Heap lock held (the header it reads must not change under it).
 bool inspectable(const void* p) {
     const auto a = reinterpret_cast<std::uintptr_t>(p);
     const std::uintptr_t base = g_heap.base.load(std::memory_order_acquire);
@@ -224,7 +226,9 @@ void atfork_parent() { g_heap.lock.unlock(); }
 void atfork_child() { g_heap.lock.reset_in_child(); }
 
 // Runs during static initialisation. pthread_atfork may itself allocate,
-// which is fine: the lock is not held here.
+// which is fine: the lock is not held here. Registering early makes our
+// prepare handler run late (they run in reverse order), after the prepare
+// handlers of later-loaded code, which may still allocate.
 [[gnu::constructor(101)]] void register_atfork() {
     pthread_atfork(atfork_prepare, atfork_parent, atfork_child);
 }
@@ -233,20 +237,20 @@ void atfork_child() { g_heap.lock.reset_in_child(); }
 
 void* heap_allocate(std::size_t size) {
     Guard g;
-    if (!ready_locked())
+    if (!ensure_ready())
         return nullptr;
     void* p = g_heap.tlsf.allocate(size);
-    if (!p && grow_locked(size, Tlsf::kAlign))
+    if (!p && grow_for(size, Tlsf::kAlign))
         p = g_heap.tlsf.allocate(size);
     return p;
 }
 
 void* heap_allocate_aligned(std::size_t align, std::size_t size) {
     Guard g;
-    if (!ready_locked())
+    if (!ensure_ready())
         return nullptr;
     void* p = g_heap.tlsf.allocate_aligned(align, size);
-    if (!p && align && !(align & (align - 1)) && grow_locked(size, align))
+    if (!p && align && !(align & (align - 1)) && grow_for(size, align))
         p = g_heap.tlsf.allocate_aligned(align, size);
     return p;
 }
@@ -275,7 +279,7 @@ void* heap_reallocate(void* p, std::size_t size, bool* bad_pointer) {
         return nullptr;
     }
     void* q = t.reallocate(p, size);
-    if (!q && grow_locked(size, Tlsf::kAlign))
+    if (!q && grow_for(size, Tlsf::kAlign))
         q = t.reallocate(p, size);
     return q;
 }
@@ -326,10 +330,10 @@ HeapStats heap_stats() {
 
 bool heap_precommit(std::size_t bytes) {
     Guard g;
-    if (!ready_locked())
+    if (!ensure_ready())
         return false;
     const std::size_t done = g_heap.committed.load(std::memory_order_relaxed);
-    return bytes <= done || commit_locked(bytes - done);
+    return bytes <= done || commit_chunks(bytes - done);
 }
 
 }  // namespace chm::mem
