@@ -35,6 +35,11 @@ typedef struct chm_kernel_config {
     int virtual_clock;    /* 1: time advances only through chm_time_consume() */
     size_t default_stack; /* stack of tasks spawned with stack_size 0; default 64 KiB */
     int rtpu_id;          /* the RTPU number printed in diagnostics (default 1) */
+    int cpu_accounting;   /* 1 (default): CPU time charged at every switch, one
+                           * clock read each; 0: charged at timer ticks and
+                           * cycle ends only (statistical between them), which
+                           * saves the clock read on yield and semaphore
+                           * hand-offs (~45 ns on a kvm-clock guest) */
 } chm_kernel_config_t;
 
 /* Fill `cfg` with the defaults above. */

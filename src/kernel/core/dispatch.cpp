@@ -28,7 +28,7 @@ void make_ready_locked(Tcb* t, bool keep_place) {
     if (!keep_place) t->s.seq = ++g_k.seq;
     if (!t->in_ready) {
         t->in_ready = true;
-        g_k.ops->enqueue(g_k.ops_self, &t->s, now_locked());
+        g_k.ops->enqueue(g_k.ops_self, &t->s, now_cached_locked());
     }
 }
 
@@ -74,7 +74,7 @@ void switch_to_locked(Tcb* next, std::uint64_t now) {
     port::Context* to = next ? &next->ctx : &g_k.idle_ctx;
     if (prev) prev->saved_errno = errno;
     g_k.current = next;
-    g_k.switched_in_at = now;
+    if (g_k.cfg.cpu_accounting) g_k.switched_in_at = now;
     g_k.quantum_due = 0;
     if (next) arm_quantum_if_shared_locked(next, now);
     ++g_k.switches;
@@ -90,8 +90,12 @@ void switch_to_locked(Tcb* next, std::uint64_t now) {
 }  // namespace
 
 void schedule_locked() {
-    const std::uint64_t now = now_locked();
-    charge_current_locked(now);
+    // Read the clock only when something needs it: per-switch CPU
+    // accounting or a round-robin quantum (a clock read costs more than the
+    // rest of a switch on a virtual machine).
+    const bool timed = g_k.cfg.cpu_accounting || g_k.cfg.quantum_ns;
+    const std::uint64_t now = timed ? now_locked() : now_cached_locked();
+    if (g_k.cfg.cpu_accounting) charge_current_locked(now);
     Tcb* cur = g_k.current;
     const bool cur_runs = cur && cur->state == TaskState::Running;
     if (cur_runs && cur->lock_nest) return;
@@ -192,6 +196,8 @@ void pending_tick() {
 // The timer signal, on the alternate stack, mask held by the port.
 bool tick_from_signal(std::uint64_t now) {
     ++g_k.ticks;
+    g_k.now_cache = now;
+    if (!g_k.cfg.cpu_accounting) charge_current_locked(now);  // statistical
     g_k.armed_at = 0;
     timers_run_locked(now);
     timer_program_locked(now);

@@ -77,6 +77,7 @@ void chm_kernel_config_init(chm_kernel_config_t* cfg) {
     cfg->quantum_ns = 1000000;
     cfg->default_stack = 64 * 1024;
     cfg->rtpu_id = 1;
+    cfg->cpu_accounting = 1;
 }
 
 int chm_kernel_init(const chm_kernel_config_t* cfg) {

@@ -7,7 +7,7 @@
 namespace chm::kernel {
 
 void waitq_insert_locked(WaitQueue* q, Tcb* t) {
-    const std::uint64_t now = now_locked();
+    const std::uint64_t now = now_cached_locked();
     Tcb** link = &q->head;
     // Behind every waiter at least as urgent: FIFO among equals.
     while (*link && !sched_before_locked(t, *link, now)) link = &(*link)->wnext;

@@ -47,7 +47,6 @@ void chm_task_yield(void) {
     IrqGuard guard;
     Tcb* cur = g_k.current;
     if (!cur) return;
-    charge_current_locked(now_locked());
     make_ready_locked(cur);  // behind its equals
     schedule_locked();
     deliver_pending_locked();
@@ -68,7 +67,7 @@ int chm_task_wait_period(void) {
         return -EINVAL;
     }
     const std::uint64_t now = now_locked();
-    charge_current_locked(now);
+    charge_current_locked(now);  // statistical when cpu_accounting is 0
     if (!cur->awaiting_release) complete_cycle_locked(cur, now);
     int r = 0;
     if (cur->release_pending) {

@@ -23,17 +23,30 @@ chm_port_switch:
     stmxcsr (%rsp)
     fnstcw  4(%rsp)
     movq    %rsp, (%rdi)
+    movq    %rsp, %rax
     movq    %rsi, %rsp
+    /* ldmxcsr and fldcw are slow (they serialise): load only what differs,
+     * which on a control task is almost never. */
+    movl    (%rsp), %ecx
+    cmpl    (%rax), %ecx
+    je      1f
     ldmxcsr (%rsp)
+1:  movzwl  4(%rsp), %ecx
+    cmpw    4(%rax), %cx
+    je      2f
     fldcw   4(%rsp)
-    addq    $8, %rsp
+2:  addq    $8, %rsp
     popq    %r15
     popq    %r14
     popq    %r13
     popq    %r12
     popq    %rbx
     popq    %rbp
-    ret
+    /* pop + indirect jump rather than `ret`: the return-stack predictor
+     * holds this context's caller, not the incoming one's, so a `ret` would
+     * mispredict on every switch. */
+    popq    %r8
+    jmp     *%r8
     .cfi_endproc
     .size   chm_port_switch, .-chm_port_switch
 
