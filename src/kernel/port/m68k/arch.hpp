@@ -43,7 +43,8 @@ inline constexpr const char* kArchName = "m68k";
 // kernel, glibc and every call site keep 4; a 32-bit load from a 2-aligned
 // sp costs an extra bus cycle on the 68020/030). `jsr` pushes a 4-byte
 // return address, so at a function's first instruction sp + 4 is aligned
-// too: the bias is 4 (≡ 0 mod 4, kept explicit for the reader).
+// too. The bias is 4 (the return address); modulo 4 it is the same as 0,
+// but it says what the test checks.
 inline constexpr unsigned kStackAlign = 4;
 inline constexpr unsigned kSpAtEntryBias = 4;
 

@@ -13,10 +13,11 @@
  * fmovem writes fp2 lowest; movem with -(sp) writes d2 lowest.
  *
  * The FPCR travels through d0 (caller-saved) rather than with
- * `fmove.l %fpcr,-(%sp)`: qemu (7.2 at least) mixes up FPCR and FPIAR when
- * it stores FP control registers to memory, so the memory forms would
- * restore the wrong register under emulation. Register-direct moves are
- * exact everywhere and cost the same on a 68882.
+ * `fmove.l %fpcr,-(%sp)`: qemu 7.2 gets the memory forms of FP control
+ * register moves wrong (the predecrement form stores FPIAR when asked for
+ * FPCR; fmovem.l of several control registers reverses FPCR and FPIAR), so
+ * under emulation the wrong register would come back. Register-direct moves
+ * are exact everywhere and cost the same on a 68882.
  */
     .text
     .globl  chm_port_switch
