@@ -221,9 +221,27 @@ bool inspectable(const void* p) {
     return size <= committed && a + size <= base + committed;
 }
 
-void atfork_prepare() { g_heap.lock.lock(); }
-void atfork_parent() { g_heap.lock.unlock(); }
-void atfork_child() { g_heap.lock.reset_in_child(); }
+// fork() holds the lock across the system call, so the hooks bracket it as
+// they bracket any heap call: the kernel thread is not preempted (and no
+// task of it calls malloc) while it forks.
+chm_heap_hook_fn g_fork_leave = nullptr;
+
+void atfork_prepare() {
+    g_fork_leave = g_leave.load(std::memory_order_acquire);
+    if (auto enter = g_enter.load(std::memory_order_acquire))
+        enter();
+    g_heap.lock.lock();
+}
+void atfork_parent() {
+    g_heap.lock.unlock();
+    if (g_fork_leave)
+        g_fork_leave();
+}
+void atfork_child() {
+    g_heap.lock.reset_in_child();
+    if (g_fork_leave)
+        g_fork_leave();
+}
 
 // Runs during static initialisation. pthread_atfork may itself allocate,
 // which is fine: the lock is not held here. Registering early makes our

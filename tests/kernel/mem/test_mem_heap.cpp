@@ -195,12 +195,22 @@ TEST(Heap, LockHooksBracketEveryCall) {
     p = chm_realloc(p, 1000);
     chm_free(p);
     chm_mem_check();
-    chm_heap_set_lock_hooks(nullptr, nullptr);
     EXPECT_EQ(g_enters.load(), 4);
     EXPECT_EQ(g_leaves.load(), 4);
+    // fork() holds the heap lock across the system call: bracketed too.
+    const pid_t pid = fork();
+    if (pid == 0)
+        _exit(0);
+    ASSERT_GT(pid, 0);
+    chm_heap_set_lock_hooks(nullptr, nullptr);
+    int status = 0;
+    EXPECT_EQ(waitpid(pid, &status, 0), pid);
+    EXPECT_GE(g_enters.load(), 5);  // other fork handlers may allocate too
+    EXPECT_EQ(g_enters.load(), g_leaves.load());
     EXPECT_FALSE(g_nested.load());
+    const int enters = g_enters.load();
     chm_free(chm_malloc(10));
-    EXPECT_EQ(g_enters.load(), 4);
+    EXPECT_EQ(g_enters.load(), enters);
 }
 
 TEST(Heap, PrecommitMakesLaterAllocationsCommitFree) {
