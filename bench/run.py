@@ -61,9 +61,11 @@ def machine():
     }
 
 
-def human(v, unit):
+def human(v, unit, short=False):
     if v is None:
         return "–"
+    if short and unit == "ns":  # the paper's round figures: "220 µs", not "220.00 µs"
+        return f"{v:g} ns" if abs(v) < 1000 else f"{v / 1e3:g} µs"
     if unit == "ns":
         a = abs(v)
         if a < 10:
@@ -89,7 +91,9 @@ def markdown(rows, rest, info, commands, quick, elapsed):
            "against a peer measured in the same run on the same machine "
            "(see ../shared/PERF.md for why absolute figures travel badly). "
            "Values are medians over repeated runs, with the min–max over those runs; "
-           "RT/2 is half a round trip. Each row states its pinning and method.", "",
+           "RT/2 is half a round trip. Each row states its pinning and method. "
+           "The paper column is the Chimera II paper's Table 1 (25 MHz 68030, 1991), "
+           "for orientation; no ratio is taken against it.", "",
            "## Machine", "",
            f"* CPU: {info['cpu']}",
            f"* cores: {info['cores']}",
@@ -123,7 +127,7 @@ def markdown(rows, rest, info, commands, quick, elapsed):
                 out.append(f"| `{r['name']}` | {human(r['value'], u)} | {rng} | "
                            f"{'`' + r['peer'] + '`' if r['peer'] else ''} | "
                            f"{human(r['peer_value'], u)} | {ratio} | "
-                           f"{(r.get('target') or '') + met} | {human(r['paper_value'], u)} | "
+                           f"{(r.get('target') or '') + met} | {human(r['paper_value'], u, short=True)} | "
                            f"{cell(r['config'])} |")
             else:
                 out.append(f"| `{r['name']}` | {human(r['value'], u)} | {rng} | "
@@ -144,7 +148,7 @@ def markdown(rows, rest, info, commands, quick, elapsed):
         for u in pending:
             out.append(f"| `{u['name']}` | {cell(u['what'])} | "
                        f"{'`' + u['peer'] + '`' if u['peer'] else ''} | {u.get('target') or ''} | "
-                       f"{human(u['paper_value'], u['unit'])} |")
+                       f"{human(u['paper_value'], u['unit'], short=True)} |")
         out.append("")
     if other:
         out.extend(["## Skipped or failed in this run", ""])
@@ -266,6 +270,8 @@ def main():
         plot_dir = Path(args.plots)
         made = plots(rows, samples, plot_dir)
         invoked = "/usr/bin/python3 bench/run.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
+        if os.environ.get("MAKELEVEL"):  # started by the Makefile: say so first
+            invoked = f"make bench{' QUICK=1' if args.quick else ''}`, i.e. `{invoked}"
         ran = " ".join(shlex.quote(c) for c in cmd).replace(tmp, "$TMP")
         md = markdown(rows, rest, machine(), (invoked, ran), args.quick, elapsed)
         if made:
