@@ -38,3 +38,20 @@ extern "C" {
 extern const std::uint64_t chm_test_preempt_patterns[];
 void chm_test_preempt_spin(std::uint64_t iterations, std::uint64_t* out);
 }
+
+// The layout of `out` per target (each regs.S documents its slots): how
+// many 64-bit slots hold registers, and which bits of the flags word the
+// spin set (mask) to which value (expected). The carry is always among them.
+#if defined(__x86_64__)
+inline constexpr int kChmPreemptRegs = 31;  // 15 integer, xmm0-15 low halves
+inline constexpr std::uint64_t kChmPreemptFlagsMask = 0x1;       // rflags.CF
+inline constexpr std::uint64_t kChmPreemptFlagsExpected = 0x1;
+#elif defined(__aarch64__)
+inline constexpr int kChmPreemptRegs = 97;  // x0-x30, v0-v31 (2 each), FPCR, FPSR
+inline constexpr std::uint64_t kChmPreemptFlagsMask = 0xf0000000;  // NZCV
+inline constexpr std::uint64_t kChmPreemptFlagsExpected = 0xb0000000;  // N C V
+#elif defined(__m68k__)
+inline constexpr int kChmPreemptRegs = 33;  // d0-d7 a0-a6, fp0-fp7 (2 each), FPCR FPSR
+inline constexpr std::uint64_t kChmPreemptFlagsMask = 0x1f;      // CCR X N Z V C
+inline constexpr std::uint64_t kChmPreemptFlagsExpected = 0x1b;  // X N V C
+#endif

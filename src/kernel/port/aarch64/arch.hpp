@@ -4,6 +4,9 @@
 
 #include <cstdint>
 
+// This port implements the preemption trampoline (preempt.S).
+#define CHM_PORT_HAS_PREEMPTION 1
+
 namespace chm::port {
 
 inline bool tas(volatile std::uint8_t* b) {

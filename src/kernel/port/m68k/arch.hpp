@@ -5,6 +5,9 @@
 
 #include <cstdint>
 
+// This port implements the preemption trampoline (preempt.S).
+#define CHM_PORT_HAS_PREEMPTION 1
+
 namespace chm::port {
 
 // `tas` is the 68k's indivisible read-modify-write: it tests the byte and
@@ -47,6 +50,12 @@ inline constexpr const char* kArchName = "m68k";
 // but it says what the test checks.
 inline constexpr unsigned kStackAlign = 4;
 inline constexpr unsigned kSpAtEntryBias = 4;
+
+// Stack the preemption trampoline uses below an interrupted stack pointer
+// (the ABI has no red zone): the CCR and PC for `rtr`, d0-d7/a0-a6, the
+// 96-bit images of fp0-fp7, FPCR/FPSR/FPIAR and 2 bytes of realignment
+// (preempt.S).
+inline constexpr unsigned kPreemptFrameMax = 192;
 
 // 64-bit atomics are not lock-free on this target (libatomic takes a lock):
 // port and kernel code must not use them, least of all in a signal handler.
