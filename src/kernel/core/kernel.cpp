@@ -20,7 +20,8 @@ void heap_enter() {
     if (port::on_kernel_thread()) port::irq_disable();
 }
 void heap_leave() {
-    if (port::on_kernel_thread()) port::irq_restore();
+    // Never switch here: libc may have called malloc holding its own locks.
+    if (port::on_kernel_thread()) port::irq_restore_no_switch();
 }
 
 void run_shutdown_hooks() {

@@ -120,6 +120,13 @@ inline void irq_restore() {
 
 inline bool irq_masked() { return g_irq.nest != 0; }
 
+// Release the mask without ever switching here: a tick that arrived while it
+// was held is re-delivered by the timer shortly instead (kPreemptRetryNs).
+// For code that may run below C library frames (the malloc family called by
+// libc itself, e.g. stdio allocating its buffer under the FILE lock): a
+// switch there would let another task into the same libc lock.
+void irq_restore_no_switch();
+
 // ------------------------------------------------------------- the timer
 
 // The timer handler the port calls, in signal context on the kernel thread's

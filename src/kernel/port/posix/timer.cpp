@@ -80,6 +80,16 @@ int timer_signal() { return SIGRTMIN + 2; }
 
 bool on_kernel_thread() { return t_kernel_thread; }
 
+void irq_restore_no_switch() {
+    __atomic_signal_fence(__ATOMIC_SEQ_CST);
+    const std::uint32_t n = g_irq.nest - 1;
+    g_irq.nest = n;
+    if (n == 0 && g_irq.pending) {
+        g_irq.pending = 0;
+        timer_arm_locked(now_ns() + kPreemptRetryNs);
+    }
+}
+
 std::uint64_t deferred_preemption_count() { return g_deferred; }
 
 std::uint64_t stray_signal_count() { return __atomic_load_n(&g_stray, __ATOMIC_RELAXED); }
