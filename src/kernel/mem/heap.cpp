@@ -2,9 +2,14 @@
 // See heap.hpp for the design. Everything here runs before main as readily
 // as after it, so the state is constant-initialised and nothing in this file
 // allocates, throws or needs a constructor to have run.
-#include "kernel/mem/heap.hpp"
 
-#include <atomic>
+// No PLT stubs: they would lie in the executable's preemptible code (see
+// mem_text.hpp). Calls into the C library go through the GOT instead.
+#pragma GCC optimize("no-plt")
+
+#include "kernel/mem/heap.hpp"
+#include "kernel/mem/mem_text.hpp"
+
 #include <cerrno>
 #include <cstdint>
 #include <cstdlib>
@@ -25,7 +30,7 @@ namespace chm::mem {
 
 namespace {
 
-inline void cpu_relax() {
+CHM_MEM_TEXT inline void cpu_relax() {
 #if defined(__x86_64__) || defined(__i386__)
     __builtin_ia32_pause();
 #elif defined(__aarch64__)
@@ -42,7 +47,7 @@ class HeapLock {
 public:
     constexpr HeapLock() = default;
 
-    void lock() {
+    CHM_MEM_TEXT void lock() {
         std::uint32_t expected = 0;
         if (cas(expected, 1))
             return;
@@ -56,17 +61,17 @@ public:
             syscall(SYS_futex, &word_, FUTEX_WAIT_PRIVATE, 2u, nullptr, nullptr, 0);
     }
 
-    void unlock() {
+    CHM_MEM_TEXT void unlock() {
         if (__atomic_exchange_n(&word_, 0u, __ATOMIC_RELEASE) == 2)
             syscall(SYS_futex, &word_, FUTEX_WAKE_PRIVATE, 1, nullptr, nullptr, 0);
     }
 
     // In a fork child only the forking thread exists, and it held the lock.
-    void reset_in_child() { __atomic_store_n(&word_, 0u, __ATOMIC_RELAXED); }
+    CHM_MEM_TEXT void reset_in_child() { __atomic_store_n(&word_, 0u, __ATOMIC_RELAXED); }
 
 private:
     static constexpr int kSpins = 100;
-    bool cas(std::uint32_t& expected, std::uint32_t desired) {
+    CHM_MEM_TEXT bool cas(std::uint32_t& expected, std::uint32_t desired) {
         return __atomic_compare_exchange_n(&word_, &expected, desired, false,
                                            __ATOMIC_ACQUIRE, __ATOMIC_RELAXED);
     }
@@ -76,8 +81,8 @@ private:
 struct Heap {
     HeapLock lock;
     // Written under the lock, read without it by heap_owns().
-    std::atomic<std::uintptr_t> base{0};
-    std::atomic<std::size_t> committed{0};
+    std::uintptr_t base = 0;
+    std::size_t committed = 0;
     std::size_t reserved = 0;
     std::size_t commits = 0;
     std::size_t foreign_frees = 0;
@@ -86,18 +91,29 @@ struct Heap {
 };
 
 constinit Heap g_heap;
-constinit std::atomic<chm_heap_hook_fn> g_enter{nullptr};
-constinit std::atomic<chm_heap_hook_fn> g_leave{nullptr};
+constinit chm_heap_hook_fn g_enter = nullptr;
+constinit chm_heap_hook_fn g_leave = nullptr;
+
+// __atomic builtins, not std::atomic, and forced inline: no helper may land
+// outside chm_mem_text, even unoptimised (see mem_text.hpp).
+template <typename T>
+CHM_MEM_INLINE inline T load_acquire(const T& v) {
+    return __atomic_load_n(&v, __ATOMIC_ACQUIRE);
+}
+template <typename T>
+CHM_MEM_INLINE inline void store_release(T& v, T x) {
+    __atomic_store_n(&v, x, __ATOMIC_RELEASE);
+}
 
 // Holds the heap lock for one heap call, with the preemption hooks around.
 class Guard {
 public:
-    Guard() : leave_(g_leave.load(std::memory_order_acquire)) {
-        if (auto enter = g_enter.load(std::memory_order_acquire))
+    CHM_MEM_TEXT Guard() : leave_(load_acquire(g_leave)) {
+        if (auto enter = load_acquire(g_enter))
             enter();
         g_heap.lock.lock();
     }
-    ~Guard() {
+    CHM_MEM_TEXT ~Guard() {
         g_heap.lock.unlock();
         if (leave_)
             leave_();
@@ -111,7 +127,7 @@ private:
 
 // CHIMERA_HEAP_MB as a number of bytes. Parsed by hand: this may run before
 // the C library has finished initialising (locale, stdio).
-std::size_t requested_reservation() {
+CHM_MEM_TEXT std::size_t requested_reservation() {
     const char* s = std::getenv("CHIMERA_HEAP_MB");
     std::size_t mb = 0;
     if (s) {
@@ -129,7 +145,7 @@ std::size_t requested_reservation() {
 }
 
 // Touch the pages now so the first allocations from them do not fault.
-void prefault(char* at, std::size_t bytes) {
+CHM_MEM_TEXT void prefault(char* at, std::size_t bytes) {
     // One system call where the kernel supports it; the stores make sure of
     // it elsewhere (older kernels, emulators that accept and ignore advice)
     // and cost a few nanoseconds a page when the pages are already there.
@@ -141,9 +157,9 @@ void prefault(char* at, std::size_t bytes) {
 
 // Commit at least `bytes` more (whole chunks, or what is left of the
 // reservation) and give them to the allocator. Heap lock held.
-bool commit_chunks(std::size_t bytes) {
+CHM_MEM_TEXT bool commit_chunks(std::size_t bytes) {
     Heap& h = g_heap;
-    const std::size_t done = h.committed.load(std::memory_order_relaxed);
+    const std::size_t done = load_acquire(h.committed);
     const std::size_t left = h.reserved - done;
     if (bytes > left)
         return false;
@@ -152,7 +168,7 @@ bool commit_chunks(std::size_t bytes) {
         n = left;
     if (n == 0)
         return false;
-    char* at = reinterpret_cast<char*>(h.base.load(std::memory_order_relaxed)) + done;
+    char* at = reinterpret_cast<char*>(load_acquire(h.base)) + done;
     const int saved_errno = errno;
     const bool ok = mprotect(at, n, PROT_READ | PROT_WRITE) == 0;
     if (ok)
@@ -160,15 +176,15 @@ bool commit_chunks(std::size_t bytes) {
     errno = saved_errno;
     if (!ok || !h.tlsf.add_pool(at, n))
         return false;
-    h.committed.store(done + n, std::memory_order_release);
+    store_release(h.committed, done + n);
     ++h.commits;
     return true;
 }
 
 // Reserve and commit the first chunk on first use. Heap lock held.
-bool ensure_ready() {
+CHM_MEM_TEXT bool ensure_ready() {
     Heap& h = g_heap;
-    if (h.base.load(std::memory_order_relaxed))
+    if (load_acquire(h.base))
         return true;
     if (h.init_failed)
         return false;
@@ -188,7 +204,7 @@ bool ensure_ready() {
         return false;
     }
     h.reserved = want;
-    h.base.store(reinterpret_cast<std::uintptr_t>(p), std::memory_order_release);
+    store_release(h.base, reinterpret_cast<std::uintptr_t>(p));
     if (!commit_chunks(kHeapChunk)) {
         h.init_failed = true;  // base stays set: heap_owns() is harmless
         return false;
@@ -200,7 +216,7 @@ bool ensure_ready() {
 // a block: the new chunk joins the free tail, and a block of this size is on
 // a list every block of which fits (TLSF rounds the request up by 1/32).
 // Heap lock held.
-bool grow_for(std::size_t size, std::size_t align) {
+CHM_MEM_TEXT bool grow_for(std::size_t size, std::size_t align) {
     if (size > Tlsf::kMaxRequest || align > Tlsf::kMaxRequest)
         return false;
     const std::size_t need = size + (size >> Tlsf::kSlLog2) + align + 4 * Tlsf::kMinBlock;
@@ -209,10 +225,10 @@ bool grow_for(std::size_t size, std::size_t align) {
 
 // A pointer the allocator may inspect without leaving committed memory.
 // Heap lock held (the header it reads must not change under it).
-bool inspectable(const void* p) {
+CHM_MEM_TEXT bool inspectable(const void* p) {
     const auto a = reinterpret_cast<std::uintptr_t>(p);
-    const std::uintptr_t base = g_heap.base.load(std::memory_order_acquire);
-    const std::size_t committed = g_heap.committed.load(std::memory_order_acquire);
+    const std::uintptr_t base = load_acquire(g_heap.base);
+    const std::size_t committed = load_acquire(g_heap.committed);
     if (a < base + Tlsf::kHeader || a - base >= committed)
         return false;
     // Its successor's header must be committed too, whatever the size word
@@ -226,18 +242,18 @@ bool inspectable(const void* p) {
 // task of it calls malloc) while it forks.
 chm_heap_hook_fn g_fork_leave = nullptr;
 
-void atfork_prepare() {
-    g_fork_leave = g_leave.load(std::memory_order_acquire);
-    if (auto enter = g_enter.load(std::memory_order_acquire))
+CHM_MEM_TEXT void atfork_prepare() {
+    g_fork_leave = load_acquire(g_leave);
+    if (auto enter = load_acquire(g_enter))
         enter();
     g_heap.lock.lock();
 }
-void atfork_parent() {
+CHM_MEM_TEXT void atfork_parent() {
     g_heap.lock.unlock();
     if (g_fork_leave)
         g_fork_leave();
 }
-void atfork_child() {
+CHM_MEM_TEXT void atfork_child() {
     g_heap.lock.reset_in_child();
     if (g_fork_leave)
         g_fork_leave();
@@ -247,13 +263,13 @@ void atfork_child() {
 // which is fine: the lock is not held here. Registering early makes our
 // prepare handler run late (they run in reverse order), after the prepare
 // handlers of later-loaded code, which may still allocate.
-[[gnu::constructor(101)]] void register_atfork() {
+[[gnu::constructor(101)]] CHM_MEM_TEXT void register_atfork() {
     pthread_atfork(atfork_prepare, atfork_parent, atfork_child);
 }
 
 }  // namespace
 
-void* heap_allocate(std::size_t size) {
+CHM_MEM_TEXT void* heap_allocate(std::size_t size) {
     Guard g;
     if (!ensure_ready())
         return nullptr;
@@ -263,7 +279,7 @@ void* heap_allocate(std::size_t size) {
     return p;
 }
 
-void* heap_allocate_aligned(std::size_t align, std::size_t size) {
+CHM_MEM_TEXT void* heap_allocate_aligned(std::size_t align, std::size_t size) {
     Guard g;
     if (!ensure_ready())
         return nullptr;
@@ -273,7 +289,7 @@ void* heap_allocate_aligned(std::size_t align, std::size_t size) {
     return p;
 }
 
-void* heap_reallocate(void* p, std::size_t size, bool* bad_pointer) {
+CHM_MEM_TEXT void* heap_reallocate(void* p, std::size_t size, bool* bad_pointer) {
     if (bad_pointer)
         *bad_pointer = false;
     if (!p)
@@ -302,7 +318,7 @@ void* heap_reallocate(void* p, std::size_t size, bool* bad_pointer) {
     return q;
 }
 
-bool heap_free(void* p) {
+CHM_MEM_TEXT bool heap_free(void* p) {
     if (!p)
         return true;
     Guard g;
@@ -313,7 +329,7 @@ bool heap_free(void* p) {
     return g_heap.tlsf.free(p);
 }
 
-std::size_t heap_usable_size(const void* p) {
+CHM_MEM_TEXT std::size_t heap_usable_size(const void* p) {
     if (!p)
         return 0;
     Guard g;
@@ -322,41 +338,52 @@ std::size_t heap_usable_size(const void* p) {
     return Tlsf::usable_size(p);
 }
 
-bool heap_owns(const void* p) {
+CHM_MEM_TEXT bool heap_owns(const void* p) {
     const auto a = reinterpret_cast<std::uintptr_t>(p);
-    const std::uintptr_t base = g_heap.base.load(std::memory_order_acquire);
-    return base && a >= base && a - base < g_heap.committed.load(std::memory_order_acquire);
+    const std::uintptr_t base = load_acquire(g_heap.base);
+    return base && a >= base && a - base < load_acquire(g_heap.committed);
 }
 
-bool heap_check(CheckReport* report) {
+CHM_MEM_TEXT bool heap_check(CheckReport* report) {
     Guard g;
-    if (!g_heap.base.load(std::memory_order_relaxed))
+    if (!load_acquire(g_heap.base))
         return true;
     return g_heap.tlsf.check(report);
 }
 
-HeapStats heap_stats() {
+CHM_MEM_TEXT HeapStats heap_stats() {
     Guard g;
     HeapStats s;
     s.reserved_bytes = g_heap.reserved;
-    s.committed_bytes = g_heap.committed.load(std::memory_order_relaxed);
+    s.committed_bytes = load_acquire(g_heap.committed);
     s.commits = g_heap.commits;
     s.foreign_frees = g_heap.foreign_frees;
     s.tlsf = g_heap.tlsf.stats();
     return s;
 }
 
-bool heap_precommit(std::size_t bytes) {
+CHM_MEM_TEXT bool heap_precommit(std::size_t bytes) {
     Guard g;
     if (!ensure_ready())
         return false;
-    const std::size_t done = g_heap.committed.load(std::memory_order_relaxed);
+    const std::size_t done = load_acquire(g_heap.committed);
     return bytes <= done || commit_chunks(bytes - done);
+}
+
+// The linker defines these for a section whose name is an identifier.
+extern "C" {
+extern const char __start_chm_mem_text[] __attribute__((weak, visibility("hidden")));
+extern const char __stop_chm_mem_text[] __attribute__((weak, visibility("hidden")));
+}
+
+CodeRange allocator_code_range() {
+    return {reinterpret_cast<std::uintptr_t>(__start_chm_mem_text),
+            reinterpret_cast<std::uintptr_t>(__stop_chm_mem_text)};
 }
 
 }  // namespace chm::mem
 
-extern "C" void chm_heap_set_lock_hooks(chm_heap_hook_fn enter, chm_heap_hook_fn leave) {
-    chm::mem::g_enter.store(enter, std::memory_order_release);
-    chm::mem::g_leave.store(leave, std::memory_order_release);
+extern "C" CHM_MEM_TEXT void chm_heap_set_lock_hooks(chm_heap_hook_fn enter, chm_heap_hook_fn leave) {
+    chm::mem::store_release(chm::mem::g_enter, enter);
+    chm::mem::store_release(chm::mem::g_leave, leave);
 }

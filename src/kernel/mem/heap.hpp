@@ -12,10 +12,14 @@
 // Memory is never returned to the system: determinism over footprint.
 //
 // Locking: a spin-then-futex lock, taken for a bounded TLSF operation (or a
-// commit). Optional hooks run around it so the kernel can mask preemption of
-// its green threads while one of them holds the lock: otherwise a task
-// preempted inside malloc would deadlock the next task on that thread that
-// calls malloc. The heap must not be used from a signal handler.
+// commit). A green thread must never be switched out inside the allocator:
+// holding this lock (the next task on its thread to call malloc would
+// deadlock), or merely inside a malloc that the C library called with one of
+// its own locks held. The allocator's code is therefore kept in one range,
+// allocator_code_range(), that the port must exclude from preemption like
+// the C library (mem_text.hpp). Optional hooks also run around the lock (for
+// ports that mask preemption instead). The heap must not be used from a
+// signal handler, and so not from the kernel's tick work.
 //
 // Initialisation is lazy and needs no constructor: the first call (which may
 // come from the dynamic loader or a static constructor, before main) reserves
@@ -23,6 +27,7 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 
 #include "kernel/mem/tlsf.hpp"
 
@@ -63,15 +68,28 @@ HeapStats heap_stats();
 // reservation is smaller or the system refuses.
 bool heap_precommit(std::size_t bytes);
 
+// The allocator's machine code, [lo, hi): the section chm_mem_text of the
+// object the allocator is linked into (mem_text.hpp says why). The port must
+// treat it like the C library's code and never preempt a task there.
+struct CodeRange {
+    std::uintptr_t lo = 0;
+    std::uintptr_t hi = 0;
+};
+CodeRange allocator_code_range();
+
 }  // namespace chm::mem
 
 extern "C" {
 // Preemption hooks, called on the calling thread: `enter` before the heap
-// lock is taken, `leave` after it is released, once each per heap call.
-// The kernel installs a pair that masks preemption when called on the kernel
-// thread (and does nothing on other threads). Install them before a second
-// thread uses the heap, or while no thread is inside it; nullptr removes a
-// hook. The hooks must not use the heap.
+// lock is taken, `leave` after it is released, once each per heap call (and
+// around fork, which holds the lock). The kernel may install a pair that
+// masks preemption when called on the kernel thread. `leave` must not switch
+// tasks (for instance by taking a tick that arrived while masked): its
+// caller may be the C library with a lock held; leave such a tick pending
+// for the port's deferral to deliver at a preemptible point. The hooks must
+// not use the heap and should themselves be non-preemptible code. Install
+// them before a second thread uses the heap, or while no thread is inside
+// it; nullptr removes a hook.
 typedef void (*chm_heap_hook_fn)(void);
 void chm_heap_set_lock_hooks(chm_heap_hook_fn enter, chm_heap_hook_fn leave);
 }

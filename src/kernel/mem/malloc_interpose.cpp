@@ -13,6 +13,11 @@
 // constructors allocate), so they rely only on the heap's lazy,
 // constructor-free initialisation; and they must never call the C
 // library's malloc family themselves.
+
+// No PLT stubs: they would lie in the executable's preemptible code (see
+// mem_text.hpp). Calls into the C library go through the GOT instead.
+#pragma GCC optimize("no-plt")
+
 #include <cerrno>
 #include <cstdlib>
 #include <cstring>
@@ -21,17 +26,18 @@
 #include <unistd.h>
 
 #include "kernel/mem/heap.hpp"
+#include "kernel/mem/mem_text.hpp"
 
 namespace {
 
 using chm::mem::heap_allocate;
 using chm::mem::heap_allocate_aligned;
 
-inline bool power_of_two(size_t x) { return x != 0 && (x & (x - 1)) == 0; }
+CHM_MEM_TEXT inline bool power_of_two(size_t x) { return x != 0 && (x & (x - 1)) == 0; }
 
-inline size_t page_size() { return static_cast<size_t>(sysconf(_SC_PAGESIZE)); }
+CHM_MEM_TEXT inline size_t page_size() { return static_cast<size_t>(sysconf(_SC_PAGESIZE)); }
 
-inline void* or_enomem(void* p) {
+CHM_MEM_TEXT inline void* or_enomem(void* p) {
     if (!p)
         errno = ENOMEM;
     return p;
@@ -41,11 +47,11 @@ inline void* or_enomem(void* p) {
 
 extern "C" {
 
-void* malloc(size_t size) noexcept { return or_enomem(heap_allocate(size)); }
+CHM_MEM_TEXT void* malloc(size_t size) noexcept { return or_enomem(heap_allocate(size)); }
 
-void free(void* p) noexcept { chm::mem::heap_free(p); }
+CHM_MEM_TEXT void free(void* p) noexcept { chm::mem::heap_free(p); }
 
-void* calloc(size_t n, size_t size) noexcept {
+CHM_MEM_TEXT void* calloc(size_t n, size_t size) noexcept {
     size_t bytes = 0;
     if (__builtin_mul_overflow(n, size, &bytes)) {
         errno = ENOMEM;
@@ -60,7 +66,7 @@ void* calloc(size_t n, size_t size) noexcept {
     return p;
 }
 
-void* realloc(void* p, size_t size) noexcept {
+CHM_MEM_TEXT void* realloc(void* p, size_t size) noexcept {
     // glibc's semantics for size 0: free and return NULL.
     bool bad = false;
     void* q = chm::mem::heap_reallocate(p, size, &bad);
@@ -69,7 +75,7 @@ void* realloc(void* p, size_t size) noexcept {
     return q;
 }
 
-void* reallocarray(void* p, size_t n, size_t size) noexcept {
+CHM_MEM_TEXT void* reallocarray(void* p, size_t n, size_t size) noexcept {
     size_t bytes = 0;
     if (__builtin_mul_overflow(n, size, &bytes)) {
         errno = ENOMEM;
@@ -78,7 +84,7 @@ void* reallocarray(void* p, size_t n, size_t size) noexcept {
     return realloc(p, bytes);
 }
 
-void* memalign(size_t align, size_t size) noexcept {
+CHM_MEM_TEXT void* memalign(size_t align, size_t size) noexcept {
     // glibc rounds a non-power-of-two alignment up rather than failing.
     if (align > (SIZE_MAX >> 1) + 1) {
         errno = EINVAL;
@@ -89,7 +95,7 @@ void* memalign(size_t align, size_t size) noexcept {
     return or_enomem(heap_allocate_aligned(align, size));
 }
 
-int posix_memalign(void** out, size_t align, size_t size) noexcept {
+CHM_MEM_TEXT int posix_memalign(void** out, size_t align, size_t size) noexcept {
     if (!power_of_two(align) || align % sizeof(void*) != 0)
         return EINVAL;
     void* p = heap_allocate_aligned(align, size);
@@ -99,7 +105,7 @@ int posix_memalign(void** out, size_t align, size_t size) noexcept {
     return 0;
 }
 
-void* aligned_alloc(size_t align, size_t size) noexcept {
+CHM_MEM_TEXT void* aligned_alloc(size_t align, size_t size) noexcept {
     if (!power_of_two(align)) {
         errno = EINVAL;
         return nullptr;
@@ -107,11 +113,11 @@ void* aligned_alloc(size_t align, size_t size) noexcept {
     return or_enomem(heap_allocate_aligned(align, size));
 }
 
-void* valloc(size_t size) noexcept {
+CHM_MEM_TEXT void* valloc(size_t size) noexcept {
     return or_enomem(heap_allocate_aligned(page_size(), size));
 }
 
-void* pvalloc(size_t size) noexcept {
+CHM_MEM_TEXT void* pvalloc(size_t size) noexcept {
     const size_t page = page_size();
     if (size > SIZE_MAX - page) {
         errno = ENOMEM;
@@ -121,6 +127,6 @@ void* pvalloc(size_t size) noexcept {
     return or_enomem(heap_allocate_aligned(page, size));
 }
 
-size_t malloc_usable_size(void* p) noexcept { return chm::mem::heap_usable_size(p); }
+CHM_MEM_TEXT size_t malloc_usable_size(void* p) noexcept { return chm::mem::heap_usable_size(p); }
 
 }  // extern "C"

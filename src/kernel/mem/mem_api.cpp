@@ -1,24 +1,30 @@
 // The public C API of include/chimera/mem.h: errno and argument handling
 // over the process heap (heap.hpp).
+
+// No PLT stubs: they would lie in the executable's preemptible code (see
+// mem_text.hpp). Calls into the C library go through the GOT instead.
+#pragma GCC optimize("no-plt")
+
 #include "chimera/mem.h"
 
 #include <cerrno>
 #include <cstring>
 
 #include "kernel/mem/heap.hpp"
+#include "kernel/mem/mem_text.hpp"
 
 using namespace chm::mem;
 
 extern "C" {
 
-void* chm_malloc(size_t size) {
+CHM_MEM_TEXT void* chm_malloc(size_t size) {
     void* p = heap_allocate(size);
     if (!p)
         errno = ENOMEM;
     return p;
 }
 
-void* chm_calloc(size_t n, size_t size) {
+CHM_MEM_TEXT void* chm_calloc(size_t n, size_t size) {
     size_t bytes = 0;
     if (__builtin_mul_overflow(n, size, &bytes)) {
         errno = ENOMEM;
@@ -34,7 +40,7 @@ void* chm_calloc(size_t n, size_t size) {
     return p;
 }
 
-void* chm_realloc(void* p, size_t size) {
+CHM_MEM_TEXT void* chm_realloc(void* p, size_t size) {
     bool bad = false;
     void* q = heap_reallocate(p, size, &bad);
     if (!q && bad)
@@ -44,9 +50,9 @@ void* chm_realloc(void* p, size_t size) {
     return q;
 }
 
-void chm_free(void* p) { heap_free(p); }
+CHM_MEM_TEXT void chm_free(void* p) { heap_free(p); }
 
-void* chm_memalign(size_t align, size_t size) {
+CHM_MEM_TEXT void* chm_memalign(size_t align, size_t size) {
     if (align == 0 || (align & (align - 1))) {
         errno = EINVAL;
         return nullptr;
@@ -57,11 +63,11 @@ void* chm_memalign(size_t align, size_t size) {
     return p;
 }
 
-size_t chm_malloc_usable_size(void* p) { return heap_usable_size(p); }
+CHM_MEM_TEXT size_t chm_malloc_usable_size(void* p) { return heap_usable_size(p); }
 
-int chm_mem_check(void) { return heap_check() ? 0 : -EFAULT; }
+CHM_MEM_TEXT int chm_mem_check(void) { return heap_check() ? 0 : -EFAULT; }
 
-int chm_mem_stats(struct chm_mem_stats* out) {
+CHM_MEM_TEXT int chm_mem_stats(struct chm_mem_stats* out) {
     if (!out)
         return -EINVAL;
     const HeapStats s = heap_stats();

@@ -1,11 +1,17 @@
 // TLSF operations: pools, size classes, allocate/free/reallocate. The layout
 // is in tlsf_block.hpp, the consistency walk in tlsf_check.cpp, the design
 // and its bounds at the top of tlsf.hpp.
+
+// No PLT stubs: they would lie in the executable's preemptible code (see
+// mem_text.hpp). Calls into the C library go through the GOT instead.
+#pragma GCC optimize("no-plt")
+
 #include "kernel/mem/tlsf.hpp"
 
 #include <cstring>
 
 #include "kernel/mem/tlsf_block.hpp"
+#include "kernel/mem/mem_text.hpp"
 
 namespace chm::mem {
 
@@ -13,28 +19,28 @@ namespace {
 
 // Index of the highest set bit; x != 0. One instruction on every target
 // (bsr/clz; bfffo on the 68020+).
-inline unsigned fls(std::size_t x) {
+CHM_MEM_TEXT inline unsigned fls(std::size_t x) {
     if constexpr (sizeof(std::size_t) == sizeof(unsigned long long))
         return 63u - static_cast<unsigned>(__builtin_clzll(x));
     else
         return 31u - static_cast<unsigned>(__builtin_clz(x));
 }
 
-inline unsigned ffs32(std::uint32_t x) { return static_cast<unsigned>(__builtin_ctz(x)); }
+CHM_MEM_TEXT inline unsigned ffs32(std::uint32_t x) { return static_cast<unsigned>(__builtin_ctz(x)); }
 
-inline std::uintptr_t align_up(std::uintptr_t v, std::size_t a) {
+CHM_MEM_TEXT inline std::uintptr_t align_up(std::uintptr_t v, std::size_t a) {
     return (v + (a - 1)) & ~static_cast<std::uintptr_t>(a - 1);
 }
 
 // Whole-block size that serves a request of `size` usable bytes.
-inline std::size_t block_size_for(std::size_t size) {
+CHM_MEM_TEXT inline std::size_t block_size_for(std::size_t size) {
     const std::size_t s = align_up(size + Tlsf::kHeader, Tlsf::kAlign);
     return s < Tlsf::kMinBlock ? Tlsf::kMinBlock : s;
 }
 
 }  // namespace
 
-Tlsf::Index Tlsf::mapping(std::size_t s) {
+CHM_MEM_TEXT Tlsf::Index Tlsf::mapping(std::size_t s) {
     if (s < kSmallBlock)
         return {0, static_cast<unsigned>(s >> kAlignLog2)};
     const unsigned f = fls(s);
@@ -44,7 +50,7 @@ Tlsf::Index Tlsf::mapping(std::size_t s) {
 
 // ------------------------------------------------------------ free lists
 
-void Tlsf::insert_free(Block* b) {
+CHM_MEM_TEXT void Tlsf::insert_free(Block* b) {
     step();
     const Index i = mapping(b->size());
     Block* head = heads_[i.fl][i.sl];
@@ -59,7 +65,7 @@ void Tlsf::insert_free(Block* b) {
     free_block_bytes_ += b->size();
 }
 
-void Tlsf::remove_free(Block* b, Index i) {
+CHM_MEM_TEXT void Tlsf::remove_free(Block* b, Index i) {
     step();
     Block* next = b->link_next;
     Block* prev = b->link_prev;
@@ -79,11 +85,11 @@ void Tlsf::remove_free(Block* b, Index i) {
     free_block_bytes_ -= b->size();
 }
 
-void Tlsf::remove_free(Block* b) { remove_free(b, mapping(b->size())); }
+CHM_MEM_TEXT void Tlsf::remove_free(Block* b) { remove_free(b, mapping(b->size())); }
 
 // Head of a list whose every block is at least `size` bytes: round the size
 // up to the next list boundary, then two find-first-set operations.
-Tlsf::Block* Tlsf::find_suitable(std::size_t size, Index& where) {
+CHM_MEM_TEXT Tlsf::Block* Tlsf::find_suitable(std::size_t size, Index& where) {
     step();
     if (size >= kSmallBlock)
         size += (std::size_t{1} << (fls(size) - kSlLog2)) - 1;
@@ -109,7 +115,7 @@ Tlsf::Block* Tlsf::find_suitable(std::size_t size, Index& where) {
 // b is on no list and its neighbours' tags describe it. Merge it with free
 // physical neighbours (at most one on each side: free blocks never touch)
 // and put the result on its list.
-void Tlsf::release(Block* b) {
+CHM_MEM_TEXT void Tlsf::release(Block* b) {
     if (b->prev_is_free()) {
         step();
         Block* p = b->prev();
@@ -132,7 +138,7 @@ void Tlsf::release(Block* b) {
 
 // Cut b (allocated, or free and on no list) down to `keep` bytes when the
 // rest can form a block of its own, and release the rest.
-void Tlsf::trim_tail(Block* b, std::size_t keep) {
+CHM_MEM_TEXT void Tlsf::trim_tail(Block* b, std::size_t keep) {
     const std::size_t size = b->size();
     if (size - keep < kMinBlock)
         return;
@@ -147,7 +153,7 @@ void Tlsf::trim_tail(Block* b, std::size_t keep) {
 
 // b is free and on no list, b's predecessor is in use. Split off its first
 // `gap` bytes as a free block of their own and return the block after them.
-Tlsf::Block* Tlsf::take_front(Block* b, std::size_t gap) {
+CHM_MEM_TEXT Tlsf::Block* Tlsf::take_front(Block* b, std::size_t gap) {
     step();
     Block* a = Block::at(b, gap);
     a->prev_size = gap;
@@ -160,7 +166,7 @@ Tlsf::Block* Tlsf::take_front(Block* b, std::size_t gap) {
 
 // Mark b (free, on no list, at least `size` bytes) allocated, returning any
 // excess to the free lists.
-void* Tlsf::use_block(Block* b, std::size_t size) {
+CHM_MEM_TEXT void* Tlsf::use_block(Block* b, std::size_t size) {
     b->set_free(false);
     b->next()->set_prev_free(false);
     trim_tail(b, size);
@@ -172,7 +178,7 @@ void* Tlsf::use_block(Block* b, std::size_t size) {
 // The header of an allocated block at p, or nullptr when p cannot be one:
 // cheap O(1) tests of alignment, flags and the successor's boundary tag that
 // catch double frees and most wild pointers before they corrupt the lists.
-Tlsf::Block* Tlsf::checked_header(const void* p) const {
+CHM_MEM_TEXT Tlsf::Block* Tlsf::checked_header(const void* p) const {
     if (reinterpret_cast<std::uintptr_t>(p) & (kAlign - 1))
         return nullptr;
     Block* b = Block::from_payload(p);
@@ -187,7 +193,7 @@ Tlsf::Block* Tlsf::checked_header(const void* p) const {
 
 // ------------------------------------------------------------- the API
 
-void* Tlsf::allocate(std::size_t size) {
+CHM_MEM_TEXT void* Tlsf::allocate(std::size_t size) {
     steps_ = 0;
     if (size > kMaxRequest)
         return nullptr;
@@ -200,7 +206,7 @@ void* Tlsf::allocate(std::size_t size) {
     return use_block(b, need);
 }
 
-void* Tlsf::allocate_aligned(std::size_t align, std::size_t size) {
+CHM_MEM_TEXT void* Tlsf::allocate_aligned(std::size_t align, std::size_t size) {
     if (align <= kAlign && align != 0 && (align & (align - 1)) == 0)
         return allocate(size);
     steps_ = 0;
@@ -224,7 +230,7 @@ void* Tlsf::allocate_aligned(std::size_t align, std::size_t size) {
     return use_block(b, need);
 }
 
-bool Tlsf::free(void* p) {
+CHM_MEM_TEXT bool Tlsf::free(void* p) {
     steps_ = 0;
     if (!p)
         return true;
@@ -239,7 +245,7 @@ bool Tlsf::free(void* p) {
     return true;
 }
 
-void* Tlsf::reallocate(void* p, std::size_t size) {
+CHM_MEM_TEXT void* Tlsf::reallocate(void* p, std::size_t size) {
     if (!p)
         return allocate(size);
     if (size == 0) {
@@ -284,13 +290,13 @@ void* Tlsf::reallocate(void* p, std::size_t size) {
     return q;
 }
 
-std::size_t Tlsf::usable_size(const void* p) {
+CHM_MEM_TEXT std::size_t Tlsf::usable_size(const void* p) {
     return p ? Block::from_payload(p)->size() - kHeader : 0;
 }
 
 // --------------------------------------------------------------- pools
 
-bool Tlsf::add_pool(void* mem, std::size_t bytes) {
+CHM_MEM_TEXT bool Tlsf::add_pool(void* mem, std::size_t bytes) {
     const auto start = reinterpret_cast<std::uintptr_t>(mem);
     if (start + bytes < start)
         return false;
@@ -341,7 +347,7 @@ bool Tlsf::add_pool(void* mem, std::size_t bytes) {
     return true;
 }
 
-bool Tlsf::contains(const void* ptr) const {
+CHM_MEM_TEXT bool Tlsf::contains(const void* ptr) const {
     const auto a = reinterpret_cast<std::uintptr_t>(ptr);
     for (const Pool* p = pools_; p; p = p->next)
         if (a >= p->lo() && a < p->hi())
@@ -349,7 +355,7 @@ bool Tlsf::contains(const void* ptr) const {
     return false;
 }
 
-TlsfStats Tlsf::stats() const {
+CHM_MEM_TEXT TlsfStats Tlsf::stats() const {
     TlsfStats s;
     s.pool_bytes = pool_bytes_;
     s.used_bytes = used_block_bytes_ - used_blocks_ * kHeader;

@@ -45,6 +45,8 @@
 #include <cstddef>
 #include <cstdint>
 
+#include "kernel/mem/mem_text.hpp"
+
 namespace chm::mem {
 
 // What check() found wrong, if anything.
@@ -121,7 +123,7 @@ public:
     static std::size_t usable_size(const void* p);
     // Do p's header and boundary tag describe an allocated block? O(1), the
     // test free() applies; p must point into a pool's memory.
-    bool is_allocated(const void* p) const { return checked_header(p) != nullptr; }
+    CHM_MEM_INLINE bool is_allocated(const void* p) const { return checked_header(p) != nullptr; }
 
     TlsfStats stats() const;  // O(1) except largest_free: O(one list)
     // Full walk: every header, boundary tag and list; see tlsf_check.cpp.
@@ -130,7 +132,7 @@ public:
     // Bitmap and list steps taken by the last allocate/allocate_aligned/
     // free/reallocate (copying in reallocate is not a step). Evidence for the
     // O(1) bound; costs one increment per step.
-    unsigned last_op_steps() const { return steps_; }
+    CHM_MEM_INLINE unsigned last_op_steps() const { return steps_; }
     // Does p lie inside a pool? O(number of pools).
     bool contains(const void* p) const;
 
@@ -160,7 +162,7 @@ private:
     bool check_pools(CheckReport* r, std::size_t& free_seen) const;
     bool check_lists(CheckReport* r, std::size_t free_seen) const;
     bool plausible_block(const void* p) const;
-    void step() { ++steps_; }
+    CHM_MEM_INLINE void step() { ++steps_; }
 
     std::uint32_t fl_map_ = 0;
     std::uint32_t sl_map_[kFlCount] = {};

@@ -12,6 +12,7 @@
 // and becomes an ordinary block when the pool grows.
 #pragma once
 
+#include "kernel/mem/mem_text.hpp"
 #include "kernel/mem/tlsf.hpp"
 
 namespace chm::mem {
@@ -27,35 +28,35 @@ struct Tlsf::Block {
     Block* link_next;
     Block* link_prev;
 
-    std::size_t size() const { return size_flags & ~kFlags; }
-    bool is_free() const { return (size_flags & kFree) != 0; }
-    bool prev_is_free() const { return (size_flags & kPrevFree) != 0; }
-    void set_size(std::size_t s) { size_flags = s | (size_flags & kFlags); }
-    void set_free(bool f) { size_flags = f ? (size_flags | kFree) : (size_flags & ~kFree); }
-    void set_prev_free(bool f) {
+    CHM_MEM_INLINE std::size_t size() const { return size_flags & ~kFlags; }
+    CHM_MEM_INLINE bool is_free() const { return (size_flags & kFree) != 0; }
+    CHM_MEM_INLINE bool prev_is_free() const { return (size_flags & kPrevFree) != 0; }
+    CHM_MEM_INLINE void set_size(std::size_t s) { size_flags = s | (size_flags & kFlags); }
+    CHM_MEM_INLINE void set_free(bool f) { size_flags = f ? (size_flags | kFree) : (size_flags & ~kFree); }
+    CHM_MEM_INLINE void set_prev_free(bool f) {
         size_flags = f ? (size_flags | kPrevFree) : (size_flags & ~kPrevFree);
     }
 
-    Block* next() const { return at(this, size()); }
-    Block* prev() const { return at(this, 0 - prev_size); }
-    void* payload() { return reinterpret_cast<char*>(this) + kHeader; }
+    CHM_MEM_INLINE Block* next() const { return at(this, size()); }
+    CHM_MEM_INLINE Block* prev() const { return at(this, 0 - prev_size); }
+    CHM_MEM_INLINE void* payload() { return reinterpret_cast<char*>(this) + kHeader; }
 
-    static Block* at(const void* base, std::size_t offset) {
+    CHM_MEM_INLINE static Block* at(const void* base, std::size_t offset) {
         // Offsets wrap on purpose for prev(): unsigned arithmetic is exact.
         return reinterpret_cast<Block*>(
             reinterpret_cast<std::uintptr_t>(base) + offset);
     }
-    static Block* from_payload(const void* p) { return at(p, 0 - kHeader); }
+    CHM_MEM_INLINE static Block* from_payload(const void* p) { return at(p, 0 - kHeader); }
 };
 
 struct Tlsf::Pool {
     Pool* next;
     std::size_t bytes;  // from this descriptor to the end of the sentinel
 
-    Block* first() const { return Block::at(this, sizeof(Pool)); }
-    Block* sentinel() const { return Block::at(this, bytes - kHeader); }
-    std::uintptr_t lo() const { return reinterpret_cast<std::uintptr_t>(this); }
-    std::uintptr_t hi() const { return lo() + bytes; }
+    CHM_MEM_INLINE Block* first() const { return Block::at(this, sizeof(Pool)); }
+    CHM_MEM_INLINE Block* sentinel() const { return Block::at(this, bytes - kHeader); }
+    CHM_MEM_INLINE std::uintptr_t lo() const { return reinterpret_cast<std::uintptr_t>(this); }
+    CHM_MEM_INLINE std::uintptr_t hi() const { return lo() + bytes; }
 };
 
 static_assert(sizeof(Tlsf::Block) <= Tlsf::kMinBlock);

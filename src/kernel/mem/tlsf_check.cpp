@@ -5,15 +5,21 @@
 // Pointers read from the heap are range-checked before they are followed,
 // so a corrupted heap yields a report rather than a crash, and every walk is
 // bounded by a count so a cycle cannot hang it. Cost: O(blocks + lists).
+
+// No PLT stubs: they would lie in the executable's preemptible code (see
+// mem_text.hpp). Calls into the C library go through the GOT instead.
+#pragma GCC optimize("no-plt")
+
 #include "kernel/mem/tlsf.hpp"
 
 #include "kernel/mem/tlsf_block.hpp"
+#include "kernel/mem/mem_text.hpp"
 
 namespace chm::mem {
 
 namespace {
 
-bool fail(CheckReport* r, const char* what, const void* where) {
+CHM_MEM_TEXT bool fail(CheckReport* r, const char* what, const void* where) {
     if (r) {
         r->what = what;
         r->where = where;
@@ -24,7 +30,7 @@ bool fail(CheckReport* r, const char* what, const void* where) {
 }  // namespace
 
 // Could p be the header of a block of some pool?
-bool Tlsf::plausible_block(const void* p) const {
+CHM_MEM_TEXT bool Tlsf::plausible_block(const void* p) const {
     const auto a = reinterpret_cast<std::uintptr_t>(p);
     if (a & (kAlign - 1))
         return false;
@@ -38,7 +44,7 @@ bool Tlsf::plausible_block(const void* p) const {
     return false;
 }
 
-bool Tlsf::check_pools(CheckReport* r, std::size_t& free_seen) const {
+CHM_MEM_TEXT bool Tlsf::check_pools(CheckReport* r, std::size_t& free_seen) const {
     std::size_t pools = 0, total = 0;
     std::size_t used_n = 0, used_b = 0, free_n = 0, free_b = 0;
     for (const Pool* p = pools_; p; p = p->next) {
@@ -105,7 +111,7 @@ bool Tlsf::check_pools(CheckReport* r, std::size_t& free_seen) const {
     return true;
 }
 
-bool Tlsf::check_lists(CheckReport* r, std::size_t free_seen) const {
+CHM_MEM_TEXT bool Tlsf::check_lists(CheckReport* r, std::size_t free_seen) const {
     if (kFlCount < 32 && (fl_map_ >> (kFlCount % 32)) != 0)
         return fail(r, "first-level bitmap has bits beyond the last class", nullptr);
     std::size_t listed = 0;
@@ -137,7 +143,7 @@ bool Tlsf::check_lists(CheckReport* r, std::size_t free_seen) const {
     return true;
 }
 
-bool Tlsf::check(CheckReport* report) const {
+CHM_MEM_TEXT bool Tlsf::check(CheckReport* report) const {
     std::size_t free_seen = 0;
     return check_pools(report, free_seen) && check_lists(report, free_seen);
 }

@@ -175,6 +175,32 @@ TEST(Heap, CheckReportsCorruption) {
     chm_free(b);
 }
 
+bool in_code_range(const void* fn) {
+    const CodeRange r = allocator_code_range();
+    const auto a = reinterpret_cast<std::uintptr_t>(fn);
+    return a >= r.lo && a < r.hi;
+}
+
+// The port keeps tasks from being preempted inside the allocator by its
+// code range (mem_text.hpp): every entry point must lie in it.
+TEST(Heap, AllocatorCodeIsOneRange) {
+    const CodeRange r = allocator_code_range();
+    ASSERT_LT(r.lo, r.hi);
+    for (const void* fn : {reinterpret_cast<const void*>(&malloc),
+                           reinterpret_cast<const void*>(&free),
+                           reinterpret_cast<const void*>(&calloc),
+                           reinterpret_cast<const void*>(&realloc),
+                           reinterpret_cast<const void*>(&posix_memalign),
+                           reinterpret_cast<const void*>(&chm_malloc),
+                           reinterpret_cast<const void*>(&chm_free),
+                           reinterpret_cast<const void*>(&chm_mem_check),
+                           reinterpret_cast<const void*>(&heap_allocate),
+                           reinterpret_cast<const void*>(&heap_free),
+                           reinterpret_cast<const void*>(&chm_heap_set_lock_hooks)})
+        EXPECT_TRUE(in_code_range(fn)) << fn;
+    EXPECT_FALSE(in_code_range(reinterpret_cast<const void*>(&in_code_range)));
+}
+
 std::atomic<int> g_enters{0};
 std::atomic<int> g_leaves{0};
 std::atomic<int> g_depth{0};
