@@ -95,6 +95,14 @@ int chm_kernel_init(const chm_kernel_config_t* cfg) {
         dispatch_install_hooks();
         if (int e = port::timer_init(dispatch_tick_handler())) return e;
         chm_heap_set_lock_hooks(heap_enter, heap_leave);
+        // libc calls malloc with its own locks held: a task must never be
+        // switched out anywhere in the allocator (hooks and PLT included).
+        const chm::mem::CodeRange alloc = chm::mem::allocator_code_range();
+        if (alloc.lo < alloc.hi) {
+            port::irq_disable();
+            port::preemptible_range_exclude(alloc.lo, alloc.hi);
+            port::irq_restore();
+        }
     } else {
         port::irq_set_pending_hook(nullptr);
     }

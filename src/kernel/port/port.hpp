@@ -211,6 +211,10 @@ std::uintptr_t interrupted_sp_from_signal(const void* ucontext);
 // kernel adds each control program it loads. Task context, mask held.
 int preemptible_range_add(std::uintptr_t lo, std::uintptr_t hi);
 void preemptible_range_remove(std::uintptr_t lo, std::uintptr_t hi);
+// Carve [lo, hi) out of every preemptible range (code that must never be
+// preempted although it lives in the main program: the allocator, which
+// libc calls with its own locks held).
+int preemptible_range_exclude(std::uintptr_t lo, std::uintptr_t hi);
 bool preemptible_pc_from_signal(std::uintptr_t pc);
 inline constexpr std::uint64_t kPreemptRetryNs = 20000;
 

@@ -68,6 +68,22 @@ void preemptible_range_remove(std::uintptr_t lo, std::uintptr_t hi) {
     }
 }
 
+int preemptible_range_exclude(std::uintptr_t lo, std::uintptr_t hi) {
+    if (lo >= hi) return -EINVAL;
+    const int n = g_count;
+    for (int i = 0; i < n; ++i) {
+        const Range r = g_ranges[i];
+        if (hi <= r.lo || lo >= r.hi) continue;
+        // Mask held by the caller: the handler never sees the table half-done.
+        g_ranges[i] = g_ranges[g_count - 1];
+        g_count = g_count - 1;
+        if (r.lo < lo) preemptible_range_add(r.lo, lo);
+        if (hi < r.hi) preemptible_range_add(hi, r.hi);
+        return preemptible_range_exclude(lo, hi);  // other ranges may overlap too
+    }
+    return 0;
+}
+
 bool preemptible_pc_from_signal(std::uintptr_t pc) {
     const int n = g_count;
     for (int i = 0; i < n; ++i)
