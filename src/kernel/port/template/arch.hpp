@@ -31,8 +31,9 @@
 //    CHM_PORT_HAS_PREEMPTION is 1) registers across a preemption.
 //
 // An emulator is not the hardware: check that the emulator implements your
-// atomic and FP control instructions faithfully (the m68k port found qemu
-// bugs in both places) and say in a comment what you checked.
+// atomic and FP control instructions faithfully (for the m68k port, qemu
+// 7.2's `tas` proved atomic but its FP control register moves to memory did
+// not) and say in a comment what you checked.
 #pragma once
 
 #error "port/template is documentation: copy it to port/<arch>/ and fill it in"
