@@ -226,6 +226,10 @@ void unready_locked(Tcb* t);
 // Run the most urgent task: switch if it is not the current one (or the
 // current one stopped running). Task or kernel context, mask held.
 void schedule_locked();
+// After a kernel call made something ready or changed an urgency: let the
+// most urgent task run and deliver what is owed to the caller. No-op outside
+// a task (spawning from main before chm_kernel_run).
+void reschedule_locked();
 // True when the current task should give up the CPU now.
 bool must_switch_locked(std::uint64_t now);
 // Block the current task (state already set); returns its wait_result.

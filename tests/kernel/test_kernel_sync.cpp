@@ -181,8 +181,8 @@ void overrunner(void*) {
     }
 }
 
-TEST_F(Sync, DeadlineHandlerAbortsTheCycleAndTheEntryRestarts) {
-    start(CHM_SCHED_MUF);
+// A 10 ms task with a 4 ms deadline whose handler decides `action`.
+void spawn_with_miss_handler(void (*body)(void*), chm_deadline_action action) {
     chm_task_attr_t a;
     chm_task_attr_init(&a);
     a.name = "over";
@@ -190,10 +190,15 @@ TEST_F(Sync, DeadlineHandlerAbortsTheCycleAndTheEntryRestarts) {
     a.deadline_ns = 4 * kMs;
     a.wcet_ns = 1 * kMs;
     a.on_deadline = on_miss;
-    a.on_deadline_arg = reinterpret_cast<void*>(intptr_t(CHM_DL_ABORT_CYCLE));
+    a.on_deadline_arg = reinterpret_cast<void*>(intptr_t(action));
     chm_tid_t id;
+    ASSERT_EQ(chm_task_spawn(&id, body, nullptr, &a), 0);
+}
+
+TEST_F(Sync, DeadlineHandlerAbortsTheCycleAndTheEntryRestarts) {
+    start(CHM_SCHED_MUF);
     g_entries = 0;
-    ASSERT_EQ(chm_task_spawn(&id, overrunner, nullptr, &a), 0);
+    spawn_with_miss_handler(overrunner, CHM_DL_ABORT_CYCLE);
     ASSERT_EQ(chm_kernel_run(), 0);
     // Cycle 0 misses at 4 ms: the handler runs in the task at once, the rest
     // of the cycle is dropped ("e" never printed), the entry restarts at 10.
@@ -207,16 +212,8 @@ TEST_F(Sync, DeadlineHandlerAbortsTheCycleAndTheEntryRestarts) {
 
 TEST_F(Sync, DeadlineHandlerMayLetTheCycleContinue) {
     start(CHM_SCHED_MUF);
-    chm_task_attr_t a;
-    chm_task_attr_init(&a);
-    a.name = "over";
-    a.period_ns = 10 * kMs;
-    a.deadline_ns = 4 * kMs;
-    a.on_deadline = on_miss;
-    a.on_deadline_arg = reinterpret_cast<void*>(intptr_t(CHM_DL_CONTINUE));
-    chm_tid_t id;
     g_entries = 0;
-    ASSERT_EQ(chm_task_spawn(&id, overrunner, nullptr, &a), 0);
+    spawn_with_miss_handler(overrunner, CHM_DL_CONTINUE);
     ASSERT_EQ(chm_kernel_run(), 0);
     EXPECT_EQ(g_log.substr(0, 3), "cDe");
     EXPECT_EQ(g_entries, 1);
@@ -232,15 +229,8 @@ void stopper_body(void*) {
 
 TEST_F(Sync, DeadlineHandlerMayStopTheRtpuGracefully) {
     start(CHM_SCHED_MUF);
-    chm_task_attr_t a;
-    chm_task_attr_init(&a);
-    a.period_ns = 10 * kMs;
-    a.deadline_ns = 4 * kMs;
-    a.on_deadline = on_miss;
-    a.on_deadline_arg = reinterpret_cast<void*>(intptr_t(CHM_DL_STOP_RTPU));
-    chm_tid_t id;
     g_hook_ran = false;
-    ASSERT_EQ(chm_task_spawn(&id, stopper_body, nullptr, &a), 0);
+    spawn_with_miss_handler(stopper_body, CHM_DL_STOP_RTPU);
     EXPECT_EQ(chm_kernel_run(), 0);
     EXPECT_TRUE(g_hook_ran);
     EXPECT_EQ(chm_time_now(), 4 * kMs + 1);

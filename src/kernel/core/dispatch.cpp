@@ -172,13 +172,18 @@ void deliver_pending_locked() {
     }
 }
 
+void reschedule_locked() {
+    if (!g_k.current) return;
+    schedule_locked();
+    deliver_pending_locked();
+}
+
 namespace {
 
 // The port's preemption trampoline calls this in the interrupted task's
 // context, mask held.
 void preempted_from_trampoline() {
-    schedule_locked();
-    deliver_pending_locked();
+    reschedule_locked();
     port::irq_restore();
 }
 
@@ -188,8 +193,7 @@ void pending_tick() {
     timers_run_locked(now);
     timer_program_locked(now);
     if (g_k.current && must_switch_locked(now)) {
-        schedule_locked();
-        deliver_pending_locked();
+        reschedule_locked();
     }
 }
 

@@ -131,10 +131,7 @@ int chm_sem_destroy(chm_sem_t* s) {
     m->magic = 0;
     while (Tcb* t = m->waiters.head) wake_locked(t, -EIDRM);
     if (m->holder) unlend_locked(m->holder);
-    if (g_k.current) {
-        schedule_locked();
-        deliver_pending_locked();
-    }
+    reschedule_locked();
     return 0;
 }
 
@@ -169,10 +166,7 @@ int chm_sem_v(chm_sem_t* s) {
     }
     // Hand the unit straight to the most urgent waiter.
     wake_locked(w, 0);
-    if (g_k.current) {
-        schedule_locked();
-        deliver_pending_locked();
-    }
+    reschedule_locked();
     return 0;
 }
 

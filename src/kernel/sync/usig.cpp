@@ -37,10 +37,7 @@ int chm_usig_send(chm_tid_t task, int signo) {
             wake_locked(t, -EINTR);
         }
     }
-    if (g_k.current) {
-        schedule_locked();
-        deliver_pending_locked();
-    }
+    reschedule_locked();
     return 0;
 }
 

@@ -206,10 +206,7 @@ int chm_task_spawn(chm_tid_t* out, void (*entry)(void*), void* arg, const chm_ta
         make_ready_locked(t);
     }
     if (out) *out = tid_of(t);
-    if (g_k.current) {
-        schedule_locked();  // the new task may be more urgent than its parent
-        deliver_pending_locked();
-    }
+    reschedule_locked();  // the new task may be more urgent than its parent
     return 0;
 }
 
@@ -254,8 +251,7 @@ int chm_task_suspend(chm_tid_t id) {
         t->state = TaskState::Suspended;
     } else if (t->state == TaskState::Running) {
         t->state = TaskState::Suspended;
-        schedule_locked();
-        deliver_pending_locked();
+        reschedule_locked();
     }
     return 0;
 }
@@ -267,10 +263,7 @@ int chm_task_resume(chm_tid_t id) {
     if (!t->suspend_count) return -EINVAL;
     if (--t->suspend_count == 0 && t->state == TaskState::Suspended) {
         make_ready_locked(t);
-        if (g_k.current) {
-            schedule_locked();
-            deliver_pending_locked();
-        }
+        reschedule_locked();
     }
     return 0;
 }
@@ -295,10 +288,7 @@ int chm_task_set_priority(chm_tid_t id, int priority) {
         waitq_remove_locked(t);
         waitq_insert_locked(q, t);
     }
-    if (g_k.current) {
-        schedule_locked();
-        deliver_pending_locked();
-    }
+    reschedule_locked();
     return 0;
 }
 

@@ -95,8 +95,7 @@ extern "C" void chm_time_consume(uint64_t ns) {
         if (due && g_k.vnow >= due) {
             timers_run_locked(g_k.vnow);
             if (must_switch_locked(g_k.vnow)) {
-                schedule_locked();
-                deliver_pending_locked();
+                reschedule_locked();
             } else if (g_k.quantum_due && g_k.vnow >= g_k.quantum_due) {
                 g_k.quantum_due = 0;  // expired with nobody to rotate with
             }

@@ -48,8 +48,7 @@ void chm_task_yield(void) {
     Tcb* cur = g_k.current;
     if (!cur) return;
     make_ready_locked(cur);  // behind its equals
-    schedule_locked();
-    deliver_pending_locked();
+    reschedule_locked();
 }
 
 int chm_task_pause_until(uint64_t restart_ns) {
@@ -113,8 +112,7 @@ void chm_task_unlock(void) {
         const std::uint64_t now = now_locked();
         timers_run_locked(now);
         timer_program_locked(now);
-        schedule_locked();
-        deliver_pending_locked();
+        reschedule_locked();
     }
 }
 
