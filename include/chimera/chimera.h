@@ -2,6 +2,7 @@
 #ifndef CHIMERA_H
 #define CHIMERA_H
 
+#include "chimera/io.h"
 #include "chimera/kernel.h"
 #include "chimera/sched.h"
 #include "chimera/sem.h"

@@ -40,6 +40,11 @@ typedef struct chm_kernel_config {
                            * cycle ends only (statistical between them), which
                            * saves the clock read on yield and semaphore
                            * hand-offs (~45 ns on a kvm-clock guest) */
+    uint64_t io_poll_ns;  /* while tasks are parked in blocking UNIX calls
+                           * (read, write, sleep...; see chimera/io.h) and
+                           * other tasks keep the CPU busy, their descriptors
+                           * are polled this often; an idle RTPU waits on them
+                           * directly. Default 1 ms; minimum 10 µs */
 } chm_kernel_config_t;
 
 /* Fill `cfg` with the defaults above. */
@@ -48,7 +53,8 @@ void chm_kernel_config_init(chm_kernel_config_t* cfg);
 /* Initialise the kernel on the calling thread, which becomes the kernel
  * thread (it receives the one timer signal). NULL means defaults.
  * Errors: -EBUSY already initialised; -EINVAL bad config (unknown policy,
- * CHM_SCHED_USER without a complete ops table, quantum below 10 µs);
+ * CHM_SCHED_USER without a complete ops table, quantum_ns or io_poll_ns
+ * below 10 µs);
  * -ENOMEM; or the error of timer creation. */
 int chm_kernel_init(const chm_kernel_config_t* cfg);
 

@@ -21,7 +21,7 @@ namespace chm::kernel {
 struct Tcb;
 
 // One pending timed event, intrusive in its owner; lives in the timer heap.
-enum class TimerKind : std::uint8_t { Wake, Release, Deadline };
+enum class TimerKind : std::uint8_t { Wake, Release, Deadline, IoPoll };
 struct TimerNode {
     std::uint64_t due = 0;
     std::int32_t idx = -1;  // slot in the timer heap; -1 = not armed
@@ -59,6 +59,7 @@ struct Tcb {
     int wait_result = 0;
     bool interruptible = false;
     TimerNode tmr;  // wake-up (pause, timeout) or release of a periodic task
+    struct IoWait* io = nullptr;  // the descriptors it waits on (io/fdwait.cpp)
     TimerNode dl;   // deadline of the current cycle
 
     // User signals.
@@ -185,6 +186,11 @@ struct Kernel {
     std::uint32_t alive = 0;
     std::int32_t free_slot = -1;    // recycled slots, linked through Tcb::next_free
 
+    // Tasks parked in blocking UNIX calls (io/fdwait.cpp): the idle loop
+    // waits on their descriptors; while other tasks run, io_tmr polls them.
+    WaitQueue io_waiters;
+    TimerNode io_tmr{0, -1, TimerKind::IoPoll, nullptr};
+
     // Shutdown hooks.
     struct Hook { void (*fn)(void*); void* arg; };
     Hook hooks[32];
@@ -239,6 +245,17 @@ int block_current_locked();
 // user code.
 void deliver_pending_locked();
 void charge_current_locked(std::uint64_t now);
+
+// ---- blocking UNIX calls (io/fdwait.cpp)
+// Poll every parked task's descriptors without waiting; wake those ready.
+void io_poll_locked();
+// The IoPoll timer fired (any context, mask held): poll, re-arm if needed.
+void io_tick_locked(std::uint64_t now);
+// Idle with parked tasks: sleep until a descriptor is ready, the timer
+// fires or the RTPU is woken. Kernel context, mask held.
+void io_idle_wait_locked();
+// About to run tasks while others are parked: keep polling them.
+void io_busy_arm_locked(std::uint64_t now);
 
 // ---- tasks (task/*.cpp)
 Tcb* tcb_lookup(chm_tid_t id);

@@ -41,7 +41,12 @@ int idle_loop_locked() {
         if (g_k.cfg.virtual_clock) timers_run_locked(now);
         Tcb* head = sched_pick_locked(now);
         if (head) {
+            if (g_k.io_waiters.head) io_busy_arm_locked(now);
             schedule_locked();  // switches to it; returns when idle again
+            continue;
+        }
+        if (g_k.io_waiters.head) {
+            io_idle_wait_locked();  // real time passes, also on the virtual clock
             continue;
         }
         if (g_k.cfg.virtual_clock) {
@@ -79,6 +84,7 @@ void chm_kernel_config_init(chm_kernel_config_t* cfg) {
     cfg->default_stack = 64 * 1024;
     cfg->rtpu_id = 1;
     cfg->cpu_accounting = 1;
+    cfg->io_poll_ns = 1000000;
 }
 
 int chm_kernel_init(const chm_kernel_config_t* cfg) {
@@ -87,6 +93,8 @@ int chm_kernel_init(const chm_kernel_config_t* cfg) {
     chm_kernel_config_init(&c);
     if (cfg) c = *cfg;
     if (c.quantum_ns && c.quantum_ns < 10000) return -EINVAL;
+    if (!c.io_poll_ns) c.io_poll_ns = 1000000;
+    if (c.io_poll_ns < 10000) return -EINVAL;
     if (!c.default_stack) c.default_stack = 64 * 1024;
     if (int e = sched_select(c.policy, c.user_sched, c.user_sched_arg)) return e;
     g_k.cfg = c;
@@ -105,6 +113,7 @@ int chm_kernel_init(const chm_kernel_config_t* cfg) {
         }
     } else {
         port::irq_set_pending_hook(nullptr);
+        port::set_kernel_thread(true);
     }
     g_k.initialised = true;
     return 0;
@@ -164,6 +173,8 @@ void chm_kernel_fini(void) {
     if (!g_k.cfg.virtual_clock) {
         chm_heap_set_lock_hooks(nullptr, nullptr);
         port::timer_fini();
+    } else {
+        port::set_kernel_thread(false);
     }
     port::irq_set_pending_hook(nullptr);
     port::chm_port_preempt_hook = nullptr;

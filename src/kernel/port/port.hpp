@@ -14,6 +14,8 @@
 
 #include "arch.hpp"  // resolved per target by the build: port/<arch>/arch.hpp
 
+struct pollfd;
+
 namespace chm::port {
 
 // ---------------------------------------------------------------- contexts
@@ -152,8 +154,11 @@ void timer_fini();
 // The timer signal number (a real-time signal).
 int timer_signal();
 
-// True on the thread that called timer_init (the kernel thread). Any context.
+// True on the kernel thread: the thread that called timer_init, or that the
+// kernel named with set_kernel_thread (a virtual-clock kernel has no timer).
+// Any context.
 bool on_kernel_thread();
+void set_kernel_thread(bool on);
 
 // Number of timer signals that reached a thread other than the kernel thread
 // (they are ignored; a test proves this stays zero).
@@ -226,7 +231,15 @@ inline constexpr std::uint64_t kPreemptRetryNs = 20000;
 // the sleep is not lost.
 void idle_wait_locked();
 
-// Wake an RTPU sleeping in idle_wait_locked(): any thread, signal handler.
+// idle_wait_locked() that also returns when one of `fds` is ready (their
+// revents are filled in) or at `until_ns` (monotonic; 0 = no limit).
+// Returns poll's count of ready descriptors, or 0 after a tick, a wake() or
+// the time limit. The timer signal is blocked from the check to the sleep
+// and unblocked atomically by ppoll, so no tick is lost.
+int idle_wait_fds_locked(struct pollfd* fds, unsigned long nfds, std::uint64_t until_ns);
+
+// Wake an RTPU sleeping in idle_wait_locked() or idle_wait_fds_locked():
+// any thread, signal handler. The latter costs a directed signal.
 void idle_wake();
 
 }  // namespace chm::port

@@ -52,6 +52,9 @@ bool timers_run_locked(std::uint64_t now) {
         case TimerKind::Deadline:
             deadline_missed_locked(t, now);
             break;
+        case TimerKind::IoPoll:
+            io_tick_locked(now);
+            break;
         }
     }
     return fired;

@@ -8,6 +8,9 @@ namespace chm::port {
 // Bumped by the timer handler and idle_wake(); idle sleeps on it.
 extern std::uint32_t g_wake_seq;
 
+// The kernel thread's id (for directed signals); 0 before timer_init.
+extern int g_kernel_tid;
+
 // Register the main program's code as preemptible (once).
 void preemptible_ranges_init();
 

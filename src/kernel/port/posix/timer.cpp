@@ -76,9 +76,12 @@ void on_timer(int, siginfo_t*, void* ucontext) {
 
 }  // namespace
 
+int g_kernel_tid = 0;
+
 int timer_signal() { return SIGRTMIN + 2; }
 
 bool on_kernel_thread() { return t_kernel_thread; }
+void set_kernel_thread(bool on) { t_kernel_thread = on; }
 
 void irq_restore_no_switch() {
     __atomic_signal_fence(__ATOMIC_SEQ_CST);
@@ -128,7 +131,8 @@ int timer_init(TickHandler handler) {
     sigevent sev{};
     sev.sigev_notify = SIGEV_THREAD_ID;
     sev.sigev_signo = sig;
-    sev._sigev_un._tid = static_cast<pid_t>(syscall(SYS_gettid));
+    g_kernel_tid = static_cast<int>(syscall(SYS_gettid));
+    sev._sigev_un._tid = static_cast<pid_t>(g_kernel_tid);
     if (timer_create(CLOCK_MONOTONIC, &sev, &g_timer) != 0) return -errno;
     g_timer_live = true;
     return 0;
@@ -150,6 +154,7 @@ void timer_fini() {
     g_timer_live = false;
     g_tick = nullptr;
     t_kernel_thread = false;
+    g_kernel_tid = 0;
 }
 
 }  // namespace chm::port

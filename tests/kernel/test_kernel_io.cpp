@@ -1,0 +1,271 @@
+// Blocking UNIX calls park only the calling task (chimera/io.h): sleeps,
+// reads and writes on pipes and sockets, poll. A "ticker" periodic task
+// proves the RTPU kept running meanwhile. Every wait is bounded; nothing
+// asserts speed.
+#include <cerrno>
+#include <chrono>
+#include <cstring>
+#include <ctime>
+#include <poll.h>
+#include <sys/socket.h>
+#include <thread>
+#include <unistd.h>
+#include <vector>
+
+#include "chimera/io.h"
+#include "kernel_fixture.hpp"
+
+namespace chm::test {
+namespace {
+
+volatile bool g_stop = false;
+volatile int g_ticks = 0;
+int g_fd[2];
+
+// A 2 ms periodic task that counts its cycles until g_stop.
+void ticker(void*) {
+    while (!g_stop) {
+        g_ticks = g_ticks + 1;
+        chm_task_wait_period();
+    }
+}
+
+struct Outcome {
+    ssize_t r = -2;
+    int err = 0;
+    uint64_t waited = 0;
+    int ticks_during = 0;
+    double cpu_s = 0;
+    char buf[64] = {};
+};
+Outcome g_out;
+
+double thread_cpu_s() {  // the kernel thread's CPU time, read from a task
+    timespec ts;
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+    return double(ts.tv_sec) + double(ts.tv_nsec) * 1e-9;
+}
+
+// Runs `body` timed in a task, records the outcome, then stops the ticker.
+template <class Body>
+void measured(Body body) {
+    const int t0 = g_ticks;
+    const uint64_t a = chm_time_now();
+    const double c0 = thread_cpu_s();
+    errno = 0;
+    g_out.r = body();
+    g_out.err = errno;
+    g_out.cpu_s = thread_cpu_s() - c0;
+    g_out.waited = chm_time_now() - a;
+    g_out.ticks_during = g_ticks - t0;
+    g_stop = true;
+}
+
+class BlockingIo : public KernelTest {
+protected:
+    void SetUp() override {
+        g_stop = false;
+        g_ticks = 0;
+        g_out = Outcome{};
+        ASSERT_EQ(pipe(g_fd), 0);
+    }
+    void TearDown() override {
+        if (helper_.joinable()) helper_.join();
+        close(g_fd[0]);
+        close(g_fd[1]);
+        KernelTest::TearDown();
+    }
+    void start_with_ticker() {
+        start(CHM_SCHED_MUF, false);
+        spawn(ticker, nullptr, "ticker", 5, 2 * kMs, 50 * kUs);
+    }
+    // A foreign thread writes `msg` into `fd` after `delay_ms`.
+    void write_later(int fd, const char* msg, int delay_ms) {
+        helper_ = std::thread([=] {
+            std::this_thread::sleep_for(std::chrono::milliseconds(delay_ms));
+            (void)::write(fd, msg, strlen(msg));
+        });
+    }
+    std::thread helper_;
+};
+
+void sleeper(void*) {
+    measured([] {
+        usleep(60000);
+        timespec ts{0, 40 * long(kMs)};
+        return ssize_t(nanosleep(&ts, nullptr));
+    });
+}
+
+TEST_F(BlockingIo, SleepParksOnlyTheCaller) {
+    start_with_ticker();
+    spawn(sleeper, nullptr, "sleeper", 1);
+    ASSERT_EQ(chm_kernel_run(), 0);
+    EXPECT_EQ(g_out.r, 0);
+    EXPECT_GE(g_out.waited, 100 * kMs);
+    EXPECT_GT(g_out.ticks_during, 10) << "the 2 ms ticker stood still during the sleep";
+}
+
+void reader(void*) {
+    measured([] { return ::read(g_fd[0], g_out.buf, sizeof g_out.buf); });
+}
+
+TEST_F(BlockingIo, ReadOnAnEmptyPipeParksUntilDataArrives) {
+    start_with_ticker();
+    spawn(reader, nullptr, "reader", 1);
+    write_later(g_fd[1], "hello", 100);
+    ASSERT_EQ(chm_kernel_run(), 0);
+    ASSERT_EQ(g_out.r, 5);
+    EXPECT_STREQ(g_out.buf, "hello");
+    EXPECT_GE(g_out.waited, 90 * kMs);
+    EXPECT_GT(g_out.ticks_during, 10) << "the ticker stood still while the reader waited";
+}
+
+TEST_F(BlockingIo, AnIdleRtpuWaitsOnTheDescriptorWithoutSpinning) {
+    start(CHM_SCHED_MUF, false);
+    spawn(reader, nullptr, "reader", 1);
+    write_later(g_fd[1], "wake", 300);
+    ASSERT_EQ(chm_kernel_run(), 0);
+    ASSERT_EQ(g_out.r, 4);
+    EXPECT_GE(g_out.waited, 290 * kMs);
+    EXPECT_LT(g_out.cpu_s, 0.15) << "the kernel thread spun while waiting on the pipe";
+}
+
+constexpr size_t kBig = 256 * 1024;  // four times a pipe's capacity
+void big_writer(void*) {
+    static std::vector<unsigned char> data(kBig);
+    for (size_t i = 0; i < kBig; ++i) data[i] = static_cast<unsigned char>(i * 131 + i / 251);
+    measured([] { return ::write(g_fd[1], data.data(), kBig); });
+}
+
+TEST_F(BlockingIo, BigWriteToAFullPipeParksBetweenPieces) {
+    start_with_ticker();
+    spawn(big_writer, nullptr, "writer", 1);
+    std::vector<unsigned char> got;
+    helper_ = std::thread([&] {
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        unsigned char b[4096];
+        while (got.size() < kBig) {
+            const ssize_t n = ::read(g_fd[0], b, sizeof b);
+            if (n <= 0) break;
+            got.insert(got.end(), b, b + n);
+            std::this_thread::sleep_for(std::chrono::microseconds(200));
+        }
+    });
+    ASSERT_EQ(chm_kernel_run(), 0);
+    helper_.join();
+    EXPECT_EQ(g_out.r, ssize_t(kBig));
+    ASSERT_EQ(got.size(), kBig);
+    for (size_t i = 0; i < kBig; ++i)
+        ASSERT_EQ(got[i], static_cast<unsigned char>(i * 131 + i / 251)) << "byte " << i;
+    EXPECT_GT(g_out.ticks_during, 5);
+}
+
+void poller(void*) {
+    measured([] {
+        pollfd p{g_fd[0], POLLIN, 0};
+        return ssize_t(::poll(&p, 1, 50));
+    });
+}
+
+TEST_F(BlockingIo, PollTimesOutWhileOthersRun) {
+    start_with_ticker();
+    spawn(poller, nullptr, "poller", 1);
+    ASSERT_EQ(chm_kernel_run(), 0);
+    EXPECT_EQ(g_out.r, 0);
+    EXPECT_GE(g_out.waited, 50 * kMs);
+    EXPECT_GT(g_out.ticks_during, 5);
+}
+
+int g_sock[2];
+void receiver(void*) {
+    measured([] { return ::recv(g_sock[0], g_out.buf, sizeof g_out.buf, 0); });
+}
+
+TEST_F(BlockingIo, RecvOnASocketParksUntilDataArrives) {
+    ASSERT_EQ(socketpair(AF_UNIX, SOCK_STREAM, 0, g_sock), 0);
+    start_with_ticker();
+    spawn(receiver, nullptr, "receiver", 1);
+    write_later(g_sock[1], "datagram", 80);
+    ASSERT_EQ(chm_kernel_run(), 0);
+    helper_.join();
+    close(g_sock[0]);
+    close(g_sock[1]);
+    ASSERT_EQ(g_out.r, 8);
+    EXPECT_STREQ(g_out.buf, "datagram");
+    EXPECT_GT(g_out.ticks_during, 10);
+}
+
+volatile int g_handled = 0;
+chm_tid_t g_reader_id;
+void on_usig(int, void*) { g_handled = g_handled + 1; }
+void interruptible_reader(void*) {
+    chm_usig_handle(3, on_usig, nullptr);
+    measured([] { return ::read(g_fd[0], g_out.buf, sizeof g_out.buf); });
+}
+void signaller(void*) {
+    usleep(20000);
+    chm_usig_send(g_reader_id, 3);
+}
+
+TEST_F(BlockingIo, AUserSignalInterruptsARead) {
+    start(CHM_SCHED_MUF, false);
+    g_handled = 0;
+    g_reader_id = spawn(interruptible_reader, nullptr, "reader", 2);
+    spawn(signaller, nullptr, "signaller", 1);
+    ASSERT_EQ(chm_kernel_run(), 0);
+    EXPECT_EQ(g_out.r, -1);
+    EXPECT_EQ(g_out.err, EINTR);
+    EXPECT_EQ(g_handled, 1);
+}
+
+void parked_forever(void*) {
+    char c;
+    (void)::read(g_fd[0], &c, 1);
+    ADD_FAILURE() << "the destroyed task ran on";
+}
+chm_tid_t g_victim;
+void destroyer(void*) {
+    usleep(20000);
+    EXPECT_EQ(chm_task_destroy(g_victim), 0);
+    g_stop = true;
+}
+
+TEST_F(BlockingIo, DestroyingAParkedTaskLeavesNothingBehind) {
+    start_with_ticker();
+    g_victim = spawn(parked_forever, nullptr, "victim", 1);
+    spawn(destroyer, nullptr, "destroyer", 2);
+    ASSERT_EQ(chm_kernel_run(), 0);
+    // The pipe becoming readable later finds nobody waiting.
+    ASSERT_EQ(::write(g_fd[1], "x", 1), 1);
+    EXPECT_EQ(chm_task_count(), 0);
+}
+
+TEST_F(BlockingIo, OutsideATaskTheCallsAreLibcs) {
+    ASSERT_EQ(::write(g_fd[1], "abc", 3), 3);
+    char b[4] = {};
+    EXPECT_EQ(::read(g_fd[0], b, 3), 3);
+    EXPECT_STREQ(b, "abc");
+    timespec ts{0, 1000000};
+    EXPECT_EQ(nanosleep(&ts, nullptr), 0);
+    pollfd p{g_fd[0], POLLIN, 0};
+    EXPECT_EQ(::poll(&p, 1, 1), 0);
+}
+
+// On the virtual clock a sleep takes exactly its virtual time, at once.
+void virtual_sleeper(void*) {
+    measured([] { return ssize_t(sleep(5)); });
+}
+
+TEST_F(BlockingIo, SleepOnTheVirtualClockIsExact) {
+    start(CHM_SCHED_MUF, true);
+    spawn(virtual_sleeper, nullptr, "sleeper", 1);
+    const auto t0 = std::chrono::steady_clock::now();
+    ASSERT_EQ(chm_kernel_run(), 0);
+    EXPECT_EQ(g_out.r, 0);
+    EXPECT_EQ(g_out.waited, 5000 * kMs);
+    EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(4));
+}
+
+}  // namespace
+}  // namespace chm::test
