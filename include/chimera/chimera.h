@@ -4,6 +4,7 @@
 
 #include "chimera/io.h"
 #include "chimera/kernel.h"
+#include "chimera/program.h"
 #include "chimera/sched.h"
 #include "chimera/sem.h"
 #include "chimera/task.h"

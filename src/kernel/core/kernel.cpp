@@ -10,6 +10,7 @@
 namespace chm::kernel {
 
 void dispatch_install_hooks();
+void programs_unload_all();
 port::TickHandler dispatch_tick_handler();
 
 namespace {
@@ -170,6 +171,7 @@ void chm_kernel_fini(void) {
     }
     g_k.zombie = nullptr;
     port::irq_restore();
+    programs_unload_all();
     if (!g_k.cfg.virtual_clock) {
         chm_heap_set_lock_hooks(nullptr, nullptr);
         port::timer_fini();

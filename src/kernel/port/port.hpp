@@ -221,6 +221,11 @@ void preemptible_range_remove(std::uintptr_t lo, std::uintptr_t hi);
 // libc calls with its own locks held).
 int preemptible_range_exclude(std::uintptr_t lo, std::uintptr_t hi);
 bool preemptible_pc_from_signal(std::uintptr_t pc);
+// Add (remove) every executable segment of the loaded object that contains
+// `addr` (a control program, or libchimera.so itself). Returns the number
+// of ranges, -ENOENT when no loaded object holds `addr`. Mask held.
+int preemptible_object_add(const void* addr);
+void preemptible_object_remove(const void* addr);
 inline constexpr std::uint64_t kPreemptRetryNs = 20000;
 
 // ------------------------------------------------------------------ idle

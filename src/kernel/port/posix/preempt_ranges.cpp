@@ -37,10 +37,49 @@ int add_main_program(dl_phdr_info* info, std::size_t, void*) {
     return 1;  // stop after the first object
 }
 
+// The executable segments of the object holding `want`: added, removed or
+// counted.
+struct ObjectWalk {
+    std::uintptr_t want;
+    enum { kAdd, kRemove } op;
+    int ranges = 0;
+    bool found = false;
+};
+
+int walk_object(dl_phdr_info* info, std::size_t, void* arg) {
+    auto* w = static_cast<ObjectWalk*>(arg);
+    bool holds = false;
+    for (int i = 0; i < info->dlpi_phnum && !holds; ++i) {
+        const auto& ph = info->dlpi_phdr[i];
+        const std::uintptr_t lo = info->dlpi_addr + ph.p_vaddr;
+        holds = ph.p_type == PT_LOAD && w->want >= lo && w->want < lo + ph.p_memsz;
+    }
+    if (!holds) return 0;
+    w->found = true;
+    for (int i = 0; i < info->dlpi_phnum; ++i) {
+        const auto& ph = info->dlpi_phdr[i];
+        if (ph.p_type != PT_LOAD || !(ph.p_flags & PF_X)) continue;
+        const std::uintptr_t lo = info->dlpi_addr + ph.p_vaddr;
+        if (w->op == ObjectWalk::kAdd) {
+            if (preemptible_range_add(lo, lo + ph.p_memsz) == 0) ++w->ranges;
+        } else {
+            preemptible_range_remove(lo, lo + ph.p_memsz);
+            ++w->ranges;
+        }
+    }
+    return 1;
+}
+
 void add_defaults() {
     if (g_defaults_added) return;
     g_defaults_added = true;
     dl_iterate_phdr(add_main_program, nullptr);
+    // The kernel's own code when it is libchimera.so rather than part of
+    // the executable: kernel calls made outside the mask (a busy
+    // chm_time_consume, a parked UNIX call) stay preemptible like the
+    // program that made them.
+    if (!preemptible_pc_from_signal(reinterpret_cast<std::uintptr_t>(&add_defaults)))
+        preemptible_object_add(reinterpret_cast<const void*>(&add_defaults));
 }
 
 }  // namespace
@@ -89,6 +128,17 @@ bool preemptible_pc_from_signal(std::uintptr_t pc) {
     for (int i = 0; i < n; ++i)
         if (pc >= g_ranges[i].lo && pc < g_ranges[i].hi) return true;
     return false;
+}
+
+int preemptible_object_add(const void* addr) {
+    ObjectWalk w{reinterpret_cast<std::uintptr_t>(addr), ObjectWalk::kAdd};
+    dl_iterate_phdr(walk_object, &w);
+    return w.found ? w.ranges : -ENOENT;
+}
+
+void preemptible_object_remove(const void* addr) {
+    ObjectWalk w{reinterpret_cast<std::uintptr_t>(addr), ObjectWalk::kRemove};
+    dl_iterate_phdr(walk_object, &w);
 }
 
 // Called from timer_init(), outside any handler.
