@@ -1,0 +1,123 @@
+/* Chimera backplane: the one mmap'd file that every RTPU and host process
+ * of a system shares, as Chimera II's boards shared a VMEbus. It holds the
+ * RTPU table, express-mail rings, the name registry, one local-memory
+ * window per RTPU and common memory (docs/architecture.md, "Backplane").
+ *
+ * A process attaches once: a chimera-rtpu process joins as RTPU n
+ * (chm_bp_join), any other program attaches as a host (chm_bp_attach_host).
+ * Attaching starts a monitor thread that detects a dead peer within 50 ms
+ * (pidfd, or /proc polling where pidfd_open is missing) and recovers it:
+ * its locks, its half-finished changes, its attachments. Restarting the
+ * same RTPU number after a crash needs no cleanup.
+ *
+ * Every function returns 0 or a negative errno-style status; after an
+ * error, chm_bp_last_error() says what failed, naming the file and field. */
+#ifndef CHIMERA_BP_H
+#define CHIMERA_BP_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+#define CHM_BP_NAME_MAX 31     /* RTPU and object names, without the NUL */
+#define CHM_BP_MAX_SLOTS 32    /* RTPU table entries at most */
+#define CHM_BP_ENV "CHIMERA_BACKPLANE"  /* overrides the default path */
+
+/* Sizes of a new backplane. All sizes in bytes. */
+typedef struct chm_bp_config {
+    uint32_t rtpu_slots;        /* 2..32; slot 0 is the host server (default 32) */
+    uint32_t ring_records;      /* express-mail records per RTPU (1..4096, default 64) */
+    uint32_t ring_record_size;  /* bytes per record, multiple of 16 (16..65536, default 256) */
+    uint32_t local_window_size; /* each RTPU's local memory, multiple of 4096 (default 256 KiB) */
+    uint32_t common_size;       /* common memory, multiple of 4096, >= 4096 (default 8 MiB) */
+    uint32_t registry_capacity; /* named objects (1..65536, default 256) */
+    uint32_t mode;              /* file permissions (default 0600) */
+} chm_bp_config_t;
+
+/* Fill `cfg` with the defaults above. */
+void chm_bp_config_init(chm_bp_config_t* cfg);
+
+/* Write the default backplane path into buf: $CHIMERA_BACKPLANE if set,
+ * else /dev/shm/chimera-<user>.bp. Errors: -EINVAL NULL buf;
+ * -ENAMETOOLONG it does not fit in len bytes. */
+int chm_bp_default_path(char* buf, size_t len);
+
+/* Create a backplane file at `path` (NULL: the default path). The whole
+ * file is built and its space reserved (posix_fallocate) under a temporary
+ * name in the same directory, then published atomically: an opener never
+ * sees a half-built file, and of two creators racing one gets -EEXIST.
+ * Errors: -EEXIST the path exists; -EINVAL a config field out of range;
+ * -EFBIG the layout reaches 4 GiB, or the file size limit; -ENOSPC no room
+ * (a full disk fails here, never later with SIGBUS); other -errno from
+ * open/fallocate/mmap/link. Nothing is left behind on error. */
+int chm_bp_create(const char* path, const chm_bp_config_t* cfg);
+
+/* Join the backplane at `path` (NULL: default) as RTPU `rtpu`
+ * (0..slots-1; 0 is the host server), named `name` (NULL: "rtpu<n>").
+ * A slot left by a dead process (or being recovered) is recovered first and
+ * taken with the next generation. The calling thread is recorded as the
+ * RTPU's kernel thread (target of directed signals).
+ * Errors: -EBUSY this process is already attached, or the slot belongs to a
+ * live process; -ECHRNG rtpu out of range; -ENAMETOOLONG; -ENOENT no file;
+ * -EBADMSG not a backplane, corrupt, or another layout version (see
+ * chm_bp_last_error); -ETIMEDOUT a recovery of that slot by another
+ * process did not finish within 5 s; other -errno from open/mmap. */
+int chm_bp_join(const char* path, int rtpu, const char* name);
+
+/* Attach an ordinary program as a host process: it takes the highest free
+ * slot (RTPU numbers count up from 1, hosts fill from the top). *slot_out
+ * (may be NULL) receives the slot. Errors as chm_bp_join, and -ENOSPC when
+ * every slot belongs to a live process. */
+int chm_bp_attach_host(const char* path, const char* name, int* slot_out);
+
+/* Leave cleanly: stop the monitor thread, drop this process's shared
+ * memory attachments, mark the slot FREE and unmap. Objects created by
+ * this process stay until destroyed. Errors: -ENOTCONN not attached. */
+int chm_bp_leave(void);
+
+/* This process's slot, or -ENOTCONN. */
+int chm_bp_self(void);
+
+/* What the last failing chm_bp_* / chm_shm_* call of this thread said, or
+ * "" when none failed yet. */
+const char* chm_bp_last_error(void);
+
+enum chm_bp_slot_state {
+    CHM_BP_FREE = 0, CHM_BP_JOINING = 1, CHM_BP_RUNNING = 2, CHM_BP_LEAVING = 3,
+    CHM_BP_DEAD = 4, CHM_BP_RECOVERING = 5
+};
+enum chm_bp_slot_kind { CHM_BP_KIND_NONE = 0, CHM_BP_KIND_RTPU = 1, CHM_BP_KIND_HOST = 2 };
+
+typedef struct chm_bp_slot_info {
+    enum chm_bp_slot_state state;
+    enum chm_bp_slot_kind kind;
+    uint32_t generation;    /* grows on every join of the slot */
+    int32_t pid;            /* 0 when free */
+    int32_t tid;            /* the RTPU's kernel thread */
+    uint32_t heartbeat_age_ms; /* since its monitor thread last beat */
+    char name[CHM_BP_NAME_MAX + 1];
+} chm_bp_slot_info_t;
+
+typedef struct chm_bp_status {
+    uint32_t slots;              /* RTPU table entries */
+    int32_t self;                /* this process's slot */
+    uint64_t created_ns;         /* CLOCK_REALTIME of creation */
+    uint32_t file_size;
+    uint32_t objects;            /* live named objects */
+    uint32_t registry_capacity;
+    uint32_t common_size, common_free;  /* bytes */
+    uint32_t recoveries;         /* dead slots recovered since creation */
+    chm_bp_slot_info_t slot[CHM_BP_MAX_SLOTS];
+} chm_bp_status_t;
+
+/* Snapshot of the attached backplane's RTPU table and usage (racy by
+ * nature: each slot is read once). Errors: -EINVAL NULL; -ENOTCONN. */
+int chm_bp_status(chm_bp_status_t* out);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,58 @@
+/* Chimera spin-locks: a lock word in shared memory (a backplane segment,
+ * chimera/shm.h) that tasks on any RTPU and threads of host processes
+ * take with one atomic test-and-set (a compare-and-swap that also records
+ * the holder). A waiter polls at an interval the caller chooses and gives
+ * the CPU away between polls (to the other tasks of its RTPU when it is a
+ * Chimera task), and gives up after a bounded time.
+ *
+ * Robust: the lock records its holder's RTPU slot, that slot's generation
+ * and the task, never a bare pid. If the holder's process dies, the next
+ * locker takes the lock over and is told so (-EOWNERDEAD), so it can
+ * repair what the lock protects.
+ *
+ * The caller's process must be attached to a backplane (chimera/bp.h). */
+#ifndef CHIMERA_SPIN_H
+#define CHIMERA_SPIN_H
+
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Lives in shared memory; 16 bytes, 4-byte aligned. Initialise with
+ * chm_spin_init before first use; never copy a lock that may be held. */
+typedef struct chm_spin {
+    uint32_t word;        /* holder's token: 0 = free */
+    uint32_t owner_task;  /* holder's task id, or 0x80000000 | thread id */
+    uint32_t dirty;       /* free for the user: e.g. 1 while changing the data */
+    uint32_t reserved;
+} chm_spin_t;
+
+#define CHM_SPIN_FOREVER UINT64_MAX
+
+/* Make `lock` free. Errors: -EINVAL NULL or misaligned. */
+int chm_spin_init(chm_spin_t* lock);
+
+/* Acquire `lock`. For the first poll_interval_ns the waiter tests the lock
+ * continuously; after that it tests once every poll_interval_ns and gives
+ * the CPU away in between (poll_interval_ns 0 means 10 µs). timeout_ns
+ * bounds the whole wait (CHM_SPIN_FOREVER: no bound; 0: one attempt).
+ * Returns 0; -EOWNERDEAD: acquired, but the previous holder died holding
+ * it (repair the data it protects); -ETIMEDOUT: not acquired within
+ * timeout_ns; -EINVAL NULL or misaligned; -ENOTCONN not attached.
+ * Not recursive: a second lock by the same RTPU waits like anyone else. */
+int chm_spin_lock(chm_spin_t* lock, uint64_t poll_interval_ns, uint64_t timeout_ns);
+
+/* One attempt: 0, -EOWNERDEAD (acquired from a dead holder), -EBUSY,
+ * -EINVAL, -ENOTCONN. */
+int chm_spin_trylock(chm_spin_t* lock);
+
+/* Release. Errors: -EPERM not held by this RTPU (or host process);
+ * -EINVAL NULL; -ENOTCONN. */
+int chm_spin_unlock(chm_spin_t* lock);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

@@ -1,0 +1,282 @@
+// A process's one attachment to a backplane: joining as RTPU n or as a
+// host, leaving, the status snapshot. Taking a slot is one CAS on its
+// status word (generation << 8 | state): FREE or DEAD (generation g) ->
+// JOINING (g + 1) -> RUNNING. A slot still held by a dead process is
+// recovered first, so restarting an RTPU after kill -9 needs no cleanup.
+#include <cerrno>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <ctime>
+
+#include <pthread.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include "chimera/bp.h"
+#include "ipc/backplane/backplane.hpp"
+
+namespace chm::bp {
+
+namespace {
+
+constexpr auto R = std::memory_order_relaxed;
+
+Attachment g_att;
+std::atomic<bool> g_attached{false};
+pthread_mutex_t g_mu = PTHREAD_MUTEX_INITIALIZER;
+pthread_once_t g_once = PTHREAD_ONCE_INIT;
+
+void nap_ms(unsigned ms) {
+    timespec ts{0, long(ms) * 1000000L};
+    ::nanosleep(&ts, nullptr);
+}
+
+// A forked child does not inherit the attachment: the slot is the
+// parent's, and the monitor thread does not exist in the child.
+void after_fork_child() {
+    if (!g_attached.load(R)) return;
+    monitor_forget_after_fork();
+    unmap(&g_att);
+    if (g_att.fd >= 0) ::close(g_att.fd);
+    std::free(g_att.local_refs);
+    g_att = Attachment{};
+    g_attached.store(false, R);
+    const pthread_mutex_t fresh = PTHREAD_MUTEX_INITIALIZER;  // the parent may have held it
+    g_mu = fresh;
+}
+void register_atfork() { ::pthread_atfork(nullptr, nullptr, after_fork_child); }
+
+void fill_slot(RtpuEntry* e, SlotKind kind, const char* name) {
+    e->pid.store(std::uint32_t(::getpid()), R);
+    e->pid_start = self_start_time();
+    e->tid.store(std::uint32_t(::syscall(SYS_gettid)), R);
+    e->kind.store(std::uint32_t(kind), R);
+    e->mailbox.store(0, R);
+    e->pending.store(0, R);
+    e->idle.store(0, R);
+    e->urgency.store(0, R);
+    e->poll_ns.store(0, R);
+    e->recoverer_pid.store(0, R);
+    e->heartbeat_ms.store(mono_ms(), R);
+    e->joined_ms.store(mono_ms(), R);
+    std::memset(e->name, 0, sizeof e->name);
+    std::memcpy(e->name, name, std::strlen(name));
+}
+
+// Take slot s. `wait` = the caller asked for this very slot (an RTPU
+// number): wait out a recovery in progress; a host just moves on.
+int take_slot(const View& v, std::uint32_t s, SlotKind kind, const char* name, bool wait,
+              std::uint32_t* gen_out) {
+    RtpuEntry* e = v.rtpu(s);
+    const std::uint32_t deadline = mono_ms() + 5000;
+    for (;;) {
+        std::uint32_t st = e->status.load(std::memory_order_acquire);
+        const std::uint32_t gen = status_gen(st);
+        switch (status_state(st)) {
+        case SlotState::Free:
+        case SlotState::Dead: {
+            const std::uint32_t ng = (gen + 1) & 0xFFFFFF ? (gen + 1) & 0xFFFFFF : 1;
+            // pid first: a JOINING slot always names a process that lived.
+            e->pid_start = self_start_time();
+            e->pid.store(std::uint32_t(::getpid()), std::memory_order_release);
+            if (!e->status.compare_exchange_strong(st, make_status(ng, SlotState::Joining),
+                                                   std::memory_order_acq_rel))
+                continue;
+            fill_slot(e, kind, name);
+            e->status.store(make_status(ng, SlotState::Running), std::memory_order_release);
+            *gen_out = ng;
+            return 0;
+        }
+        case SlotState::Joining:
+        case SlotState::Running:
+        case SlotState::Leaving:
+            if (!slot_holder_dead(v, s, st)) return -EBUSY;
+            if (status_state(st) == SlotState::Joining) {  // may be a racing joiner's pid: confirm
+                nap_ms(20);
+                if (e->status.load(std::memory_order_acquire) != st || !slot_holder_dead(v, s, st)) continue;
+            }
+            recover_slot(v, s, gen);
+            break;
+        case SlotState::Recovering:
+            if (slot_holder_dead(v, s, st)) {
+                recover_slot(v, s, gen);  // the recoverer died too: take over
+            } else {
+                if (!wait) return -EBUSY;
+                if (std::int32_t(mono_ms() - deadline) > 0) return -ETIMEDOUT;
+                nap_ms(1);
+            }
+            break;
+        default:
+            return -EBADMSG;  // not a state this layout writes
+        }
+    }
+}
+
+int attach(const char* path, int want, SlotKind kind, const char* name, int* slot_out) {
+    char defpath[4096];
+    if (!path) {
+        if (chm_bp_default_path(defpath, sizeof defpath)) return set_error("default backplane path too long"), -ENAMETOOLONG;
+        path = defpath;
+    }
+    if (std::strlen(path) >= sizeof g_att.path) return set_error("backplane path too long"), -ENAMETOOLONG;
+    char autoname[kNameMax + 1];
+    if (!name) {
+        std::snprintf(autoname, sizeof autoname, kind == SlotKind::Host ? "host%d" : "rtpu%d", int(::getpid()));
+        if (kind == SlotKind::Rtpu) std::snprintf(autoname, sizeof autoname, "rtpu%d", want);
+        name = autoname;
+    }
+    if (std::strlen(name) > kNameMax) return set_error("backplane %s: name \"%s\" longer than %u", path, name, kNameMax), -ENAMETOOLONG;
+    if (kind == SlotKind::Rtpu && want < 0) return set_error("backplane %s: RTPU %d out of range", path, want), -ECHRNG;
+
+    ::pthread_once(&g_once, register_atfork);
+    ::pthread_mutex_lock(&g_mu);
+    if (g_attached.load(R)) {
+        ::pthread_mutex_unlock(&g_mu);
+        return set_error("this process is already attached to %s", g_att.path), -EBUSY;
+    }
+    Attachment& a = g_att;
+    char why[320];
+    int r = map_file(path, true, &a, &a.fd, why, sizeof why);
+    if (r) {
+        ::pthread_mutex_unlock(&g_mu);
+        set_error("backplane %s: %s", path, why);
+        return r;
+    }
+    std::uint32_t slot = 0, gen = 0;
+    if (kind == SlotKind::Rtpu) {
+        if (std::uint32_t(want) >= a.slots()) {
+            r = -ECHRNG;
+            set_error("backplane %s: RTPU %d out of range (slots 0..%u)", path, want, a.slots() - 1);
+        } else {
+            slot = std::uint32_t(want);
+            r = take_slot(a, slot, kind, name, true, &gen);
+            if (r == -EBUSY) set_error("backplane %s: RTPU %d belongs to live process %u", path, want, a.rtpu(slot)->pid.load(R));
+            else if (r) set_error("backplane %s: RTPU %d: recovery by another process did not finish", path, want);
+        }
+    } else {
+        r = -ENOSPC;
+        for (std::uint32_t s = a.slots() - 1; s >= 1 && r; --s) {
+            if (take_slot(a, s, kind, name, false, &gen) == 0) {
+                slot = s;
+                r = 0;
+            }
+        }
+        if (r) set_error("backplane %s: every slot belongs to a live process", path);
+    }
+    if (r == 0) {
+        a.slot = slot;
+        a.gen = gen;
+        a.token = make_token(slot, gen);
+        a.kind = kind;
+        std::strcpy(a.path, path);
+        a.local_refs = static_cast<std::uint32_t*>(std::calloc(a.hdr()->geo.registry_capacity, sizeof(std::uint32_t)));
+        if (!a.local_refs) r = -ENOMEM;
+        else if ((r = monitor_start(&a)) != 0) set_error("backplane %s: cannot start the monitor thread", path);
+        if (r) {
+            std::free(a.local_refs);
+            a.rtpu(slot)->pid.store(0, R);
+            a.rtpu(slot)->status.store(make_status(gen, SlotState::Free), std::memory_order_release);
+        }
+    }
+    if (r) {
+        unmap(&a);
+        ::close(a.fd);
+        a = Attachment{};
+    } else {
+        g_attached.store(true, std::memory_order_release);
+        if (slot_out) *slot_out = int(slot);
+    }
+    ::pthread_mutex_unlock(&g_mu);
+    return r;
+}
+
+}  // namespace
+
+Attachment* current() { return g_attached.load(std::memory_order_acquire) ? &g_att : nullptr; }
+
+}  // namespace chm::bp
+
+using namespace chm::bp;
+
+extern "C" {
+
+int chm_bp_join(const char* path, int rtpu, const char* name) {
+    return attach(path, rtpu, SlotKind::Rtpu, name, nullptr);
+}
+
+int chm_bp_attach_host(const char* path, const char* name, int* slot_out) {
+    return attach(path, -1, SlotKind::Host, name, slot_out);
+}
+
+int chm_bp_leave(void) {
+    ::pthread_mutex_lock(&g_mu);
+    if (!g_attached.load(R)) {
+        ::pthread_mutex_unlock(&g_mu);
+        return -ENOTCONN;
+    }
+    Attachment& a = g_att;
+    monitor_stop();
+    RtpuEntry* e = a.rtpu(a.slot);
+    std::uint32_t st = make_status(a.gen, SlotState::Running);
+    e->status.compare_exchange_strong(st, make_status(a.gen, SlotState::Leaving), std::memory_order_acq_rel);
+    // Drop every attachment of this slot (ours and any left over).
+    if (registry_lock(a, a.token) == 0) {
+        for (std::uint32_t i = 0; i < a.hdr()->geo.registry_capacity; ++i)
+            if (a.entry(i)->attached.load(R) & (1u << a.slot)) registry_detach_locked(a, i, a.slot, a.token);
+        registry_unlock(a);
+    }
+    e->pid.store(0, R);
+    e->pid_start = 0;
+    e->tid.store(0, R);
+    e->idle.store(0, R);
+    e->status.store(make_status(a.gen, SlotState::Free), std::memory_order_release);
+    g_attached.store(false, std::memory_order_release);
+    unmap(&a);
+    ::close(a.fd);
+    std::free(a.local_refs);
+    a = Attachment{};
+    ::pthread_mutex_unlock(&g_mu);
+    return 0;
+}
+
+int chm_bp_self(void) {
+    const Attachment* a = current();
+    return a ? int(a->slot) : -ENOTCONN;
+}
+
+int chm_bp_status(chm_bp_status_t* out) {
+    if (!out) return -EINVAL;
+    const Attachment* a = current();
+    if (!a) return -ENOTCONN;
+    std::memset(out, 0, sizeof *out);
+    const Header* h = a->hdr();
+    out->slots = h->geo.rtpu_slots;
+    out->self = int32_t(a->slot);
+    out->created_ns = h->created_ns;
+    out->file_size = h->file_size;
+    out->registry_capacity = h->geo.registry_capacity;
+    for (std::uint32_t i = 0; i < h->geo.registry_capacity; ++i)
+        if (a->entry(i)->state.load(R) == std::uint32_t(EntryState::Live)) ++out->objects;
+    out->common_size = h->geo.common_size;
+    out->common_free = arena_free_bytes(*a, a->common_arena());
+    out->recoveries = h->recoveries.load(R);
+    const std::uint32_t now = mono_ms();
+    for (std::uint32_t s = 0; s < out->slots; ++s) {
+        const RtpuEntry* e = a->rtpu(s);
+        chm_bp_slot_info_t& o = out->slot[s];
+        const std::uint32_t st = e->status.load(std::memory_order_acquire);
+        o.state = chm_bp_slot_state(status_state(st));
+        o.generation = status_gen(st);
+        o.kind = chm_bp_slot_kind(e->kind.load(R));
+        o.pid = int32_t(e->pid.load(R));
+        o.tid = int32_t(e->tid.load(R));
+        const std::uint32_t hb = e->heartbeat_ms.load(R);
+        o.heartbeat_age_ms = hb ? now - hb : 0;
+        std::memcpy(o.name, e->name, sizeof o.name);
+        o.name[CHM_BP_NAME_MAX] = 0;
+    }
+    return 0;
+}
+
+}  // extern "C"

@@ -1,0 +1,250 @@
+// The backplane's internal C++ interface: a process's view of the mapped
+// file, its one attachment, the robust lock, the name registry, the arenas
+// and death recovery. Other IPC subsystems (express mail, remote
+// semaphores, message queues) build on this header; the public C API is
+// include/chimera/bp.h, shm.h and spin.h.
+//
+// Lock order (never take an earlier one while holding a later one):
+//   registry lock -> object locks (a subsystem's own) -> arena locks.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "ipc/backplane/layout.hpp"
+
+namespace chm::bp {
+
+// ------------------------------------------------------------------ views
+
+// One process's mapping of a backplane file. Offsets are resolved here and
+// nowhere else ("automatic address resolution").
+struct View {
+    char* base = nullptr;
+    std::uint32_t size = 0;
+
+    Header* hdr() const { return reinterpret_cast<Header*>(base); }
+    template <class T>
+    T* at(std::uint32_t off) const { return reinterpret_cast<T*>(base + off); }
+    std::uint32_t off_of(const void* p) const {
+        return static_cast<std::uint32_t>(static_cast<const char*>(p) - base);
+    }
+    bool contains(std::uint32_t off, std::uint32_t len) const {
+        return off <= size && len <= size - off;
+    }
+    std::uint32_t slots() const { return hdr()->geo.rtpu_slots; }
+    RtpuEntry* rtpu(std::uint32_t slot) const {
+        return at<RtpuEntry>(hdr()->regions[kRegionTable].offset) + slot;
+    }
+    RegistryEntry* entry(std::uint32_t i) const {
+        return at<RegistryEntry>(hdr()->regions[kRegionRegistry].offset) + i;
+    }
+    RingHeader* ring(std::uint32_t slot) const {
+        return at<RingHeader>(hdr()->regions[kRegionRings].offset + slot * hdr()->ring_stride);
+    }
+    ArenaHeader* common_arena() const { return at<ArenaHeader>(hdr()->regions[kRegionCommon].offset); }
+    ArenaHeader* local_arena(std::uint32_t slot) const {
+        return at<ArenaHeader>(hdr()->regions[kRegionLocals].offset +
+                               slot * hdr()->geo.local_window_size);
+    }
+    // kWhereCommon or a slot number; nullptr when out of range.
+    ArenaHeader* arena_for(std::uint32_t where) const {
+        if (where == kWhereCommon) return common_arena();
+        return where < slots() ? local_arena(where) : nullptr;
+    }
+};
+
+// The process's one attachment (chm_bp_join / chm_bp_attach_host).
+struct Attachment : View {
+    int fd = -1;
+    std::uint32_t slot = 0;
+    std::uint32_t gen = 0;
+    std::uint32_t token = 0;
+    SlotKind kind = SlotKind::None;
+    std::uint32_t* local_refs = nullptr;  // per registry entry: attaches by this process
+    char path[4096] = {};
+};
+
+// The attachment, or nullptr when this process is not attached. Other IPC
+// subsystems use this; it stays valid until chm_bp_leave.
+Attachment* current();
+
+// -------------------------------------------------------------- the file
+
+// Why an operation failed, for chm_bp_last_error() (thread-local).
+void set_error(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
+
+// Check a header against the file's size before anything is trusted.
+// Returns 0 or -EBADMSG with `why` naming the field.
+int validate_header(const Header& h, std::uint64_t file_size, char* why, std::size_t n);
+
+// Open, validate and map a backplane file (read-write or read-only).
+// Nothing is left mapped or open on error; `why` names the problem.
+int map_file(const char* path, bool writable, View* out, int* fd_out, char* why, std::size_t n);
+void unmap(View* v);
+
+// Geometry -> file layout. Returns false (and `why`) when out of range.
+bool plan_layout(const Geometry& g, Header* h, char* why, std::size_t n);
+
+// ------------------------------------------------------ processes and time
+
+std::uint32_t mono_ms();
+// Field 22 of /proc/<pid>/stat (start time in clock ticks since boot), or 0
+// when there is no such process or it is a zombie.
+std::uint64_t proc_start_time(int pid);
+// Is `pid` alive and (when start != 0) the process that started at `start`?
+// `start_bits` compares only the low 32 bits (recoverer records).
+bool proc_alive(int pid, std::uint64_t start, bool low32 = false);
+std::uint64_t self_start_time();
+// Give the CPU away for about `ns`: inside a Chimera task, to the other
+// tasks of its RTPU (chm_task_pause_until); elsewhere nanosleep.
+void relinquish(std::uint64_t ns);
+// What a lock records as its holder's task: the Chimera task id, or
+// 0x80000000 | Linux thread id outside a task.
+std::uint32_t task_word();
+
+// --------------------------------------------------------- the robust lock
+
+// Does `token` name a live holder? Cheap: the RTPU table says so (slot in
+// JOINING, RUNNING or LEAVING with that generation; a recovery token:
+// slot RECOVERING). Deep: also asks the kernel whether the process lives.
+bool token_alive(const View& v, std::uint32_t token, bool deep);
+
+// Acquire `l` for `me` (a token). Tests the lock continuously for the
+// first `poll_ns`, then once every `poll_ns`, giving the CPU away between
+// tests (relinquish). A holder that is dead is robbed: the lock passes to
+// `me` by compare-and-swap from exactly that token.
+// Returns 0; -EOWNERDEAD: acquired, the previous holder died (check
+// l->dirty and repair); -ETIMEDOUT after `timeout_ns` (UINT64_MAX: none).
+int lock_acquire(const View& v, Lock* l, std::uint32_t me, std::uint64_t poll_ns,
+                 std::uint64_t timeout_ns);
+// One attempt: 0, -EOWNERDEAD (robbed a dead holder) or -EBUSY.
+int lock_try(const View& v, Lock* l, std::uint32_t me);
+void lock_release(Lock* l);
+// Set before changing the structure a lock guards, clear after.
+void lock_mark_dirty(Lock* l);
+void lock_clear_dirty(Lock* l);
+// Internal locks wait at most this long for a live holder.
+inline constexpr std::uint64_t kInternalTimeoutNs = 5'000'000'000ull;
+inline constexpr std::uint64_t kInternalPollNs = 20'000;
+
+// ---------------------------------------------------------------- arenas
+
+void arena_init(const View& v, std::uint32_t off, std::uint32_t size);
+// Lock an arena (repairing it if its last holder died mid-change).
+// 0, -ETIMEDOUT, -ENOTRECOVERABLE (broken: its chain could not be walked).
+int arena_lock(const View& v, ArenaHeader* a, std::uint32_t me);
+void arena_unlock(ArenaHeader* a);
+// With the arena lock held: a payload offset (16-aligned) or 0 (no space).
+// The block is uncommitted (owner = `owner`) until arena_commit.
+std::uint32_t arena_alloc_locked(const View& v, ArenaHeader* a, std::uint32_t size,
+                                 std::uint32_t owner);
+void arena_commit(const View& v, std::uint32_t payload);
+// 0, or -EINVAL when `payload` is not a used block of this arena.
+int arena_free_locked(const View& v, ArenaHeader* a, std::uint32_t payload);
+// Is `payload` a used block of `a` with at least `size` bytes?
+bool arena_block_used(const View& v, const ArenaHeader* a, std::uint32_t payload,
+                      std::uint32_t size);
+// Walk the chain, fix prev sizes, merge neighbouring free blocks, rebuild
+// the free list and counters. False (and the arena marked broken) when the
+// chain itself is damaged.
+bool arena_rebuild_locked(const View& v, ArenaHeader* a);
+// Free every used block still owned by an allocation that was never
+// committed (only possible for a holder of the registry lock who died).
+void arena_sweep_uncommitted_locked(const View& v, ArenaHeader* a);
+std::uint32_t arena_free_bytes(const View& v, const ArenaHeader* a);
+
+// Report sink for the strict checks (bpcheck, tests).
+struct Report {
+    void (*emit)(void* ctx, const char* line) = nullptr;
+    void* ctx = nullptr;
+    unsigned problems = 0;
+    void problem(const char* fmt, ...) __attribute__((format(printf, 2, 3)));
+};
+// Strict consistency check of one arena (read-only). `name` prefixes lines.
+void arena_check(const View& v, const ArenaHeader* a, std::uint32_t off, std::uint32_t size,
+                 const char* name, Report& r);
+
+// What check_backplane counted.
+struct Summary {
+    std::uint32_t rtpus = 0, hosts = 0, dead = 0, objects = 0, destroying = 0;
+    std::uint64_t common_used = 0, common_size = 0, local_used = 0, local_size = 0;
+};
+// Verify every structure of a mapped file (read-only; header already
+// validated by map_file): the RTPU table and its processes, every lock
+// (held by a dead owner? left dirty?), the rings, the registry and every
+// arena. One Report line per problem. On a live system a structure in the
+// middle of a change may be reported; a quiescent file must check clean.
+void check_backplane(const View& v, Report& r, Summary* sum);
+
+// -------------------------------------------------------- name registry
+
+// Lock the registry for `me`, repairing it when its last holder died
+// mid-change. 0, -ETIMEDOUT or -ENOTRECOVERABLE.
+int registry_lock(const View& v, std::uint32_t me);
+void registry_unlock(const View& v);
+// With the registry lock held: the index of the live entry called `name`
+// (any kind when kind == kKindNone), or -ENOENT.
+int registry_find_locked(const View& v, const char* name, std::uint32_t kind);
+// The index of the entry whose payload starts at `offset`, or -ENOENT.
+int registry_find_offset_locked(const View& v, std::uint32_t offset);
+
+// A committed entry's contents, read without the lock.
+struct EntryInfo {
+    std::uint32_t index, kind, offset, size, where, owner;
+};
+// Lock-free lookup of a live entry: 0 or -ENOENT.
+int registry_lookup(const View& v, const char* name, std::uint32_t kind, EntryInfo* out);
+
+// Create an object: reserve an entry, allocate `size` bytes in `where`
+// (kWhereCommon or a slot's window), commit, and mark it attached by slot
+// `attach_slot`. The caller holds the registry lock (so it can initialise
+// the object before anyone can find it... the entry is live on return).
+// 0; -EEXIST, -ENOSPC (registry full), -ENOMEM (window full), -EINVAL,
+// -ENOTRECOVERABLE (arena broken), -ETIMEDOUT.
+int registry_create_locked(const View& v, std::uint32_t me, std::uint32_t kind, const char* name,
+                           std::uint32_t size, std::uint32_t where, std::uint32_t attach_slot,
+                           EntryInfo* out);
+// Remove the name now; the memory goes when no slot has it attached.
+void registry_destroy_locked(const View& v, std::uint32_t index, std::uint32_t me);
+// Clear slot's attach bit; frees a destroyed entry nobody holds.
+void registry_detach_locked(const View& v, std::uint32_t index, std::uint32_t slot,
+                            std::uint32_t me);
+// The repair run when the registry lock was robbed from a dead holder
+// mid-change: finish or undo entries left half-changed and free
+// allocations never committed. Also run by every recovery.
+void registry_repair_locked(const View& v, std::uint32_t me);
+void read_name(const RegistryEntry* e, char out[kNameMax + 1]);
+bool valid_name(const char* name, std::size_t* len);
+
+// -------------------------------------------------------------- recovery
+
+// Called for every live or destroying registry entry of its kind when slot
+// `dead_slot` (generation `dead_gen`) died, with the registry lock held by
+// `recovery_token`. It removes the dead RTPU's waiters, robs the dead
+// RTPU's locks of the object (lock_acquire with recovery_token robs them),
+// and repairs the object or marks it broken.
+using RecoverFn = void (*)(const View& v, std::uint32_t entry_index, std::uint32_t dead_slot,
+                           std::uint32_t dead_gen, std::uint32_t recovery_token);
+// Register the callback of one kind in this process (later registrations
+// replace earlier). 0 or -EINVAL. Subsystems that must always be recovered
+// also add a line to kBuiltinRecovery in recovery.cpp, so any survivor
+// recovers them whether or not it used that subsystem.
+int register_recovery(std::uint32_t kind, RecoverFn fn);
+
+// Recover slot `slot` of generation `gen` if its holder is dead and nobody
+// else is recovering it: rob its locks, repair, run the per-kind callbacks,
+// detach it everywhere, mark it DEAD. Returns true when this call did the
+// recovery. Safe to call from any number of processes at once.
+bool recover_slot(const View& v, std::uint32_t slot, std::uint32_t gen);
+
+// Is the holder of slot `slot` (as of status `st`) dead? Deep check.
+bool slot_holder_dead(const View& v, std::uint32_t slot, std::uint32_t st);
+
+// The monitor thread of the current attachment.
+int monitor_start(Attachment* a);
+void monitor_stop();
+// In a forked child: the thread does not exist there; drop its state.
+void monitor_forget_after_fork();
+
+}  // namespace chm::bp

@@ -1,0 +1,183 @@
+// The backplane checker behind chimera-bpcheck and the tests: reads a
+// mapped file (read-only is enough) and reports, one line each, every
+// inconsistency it finds, naming the structure and field.
+#include <cstdarg>
+#include <cstdio>
+#include <cstring>
+
+#include "ipc/backplane/backplane.hpp"
+
+namespace chm::bp {
+
+namespace {
+
+constexpr auto R = std::memory_order_relaxed;
+
+const char* state_name(std::uint32_t s) {
+    static const char* const kNames[] = {"FREE", "JOINING", "RUNNING", "LEAVING", "DEAD", "RECOVERING"};
+    return s < kStateCount ? kNames[s] : "?";
+}
+
+void check_lock(const View& v, const Lock& l, const char* what, Report& r) {
+    const std::uint32_t t = l.token.load(R);
+    if (t == 0) {
+        if (l.dirty.load(R)) r.problem("%s.dirty is set on a free lock", what);
+        return;
+    }
+    if (!token_alive(v, t, true))
+        r.problem("%s: held by a dead owner (token 0x%08x: slot %u generation %u%s)", what, t, token_slot(t),
+                  token_gen(t), token_recovery(t) ? ", recovery" : "");
+}
+
+void check_table(const View& v, Report& r, Summary* sum) {
+    char what[64];
+    for (std::uint32_t s = 0; s < v.slots(); ++s) {
+        const RtpuEntry* e = v.rtpu(s);
+        const std::uint32_t st = e->status.load(R);
+        const std::uint32_t state = st & 0xFF, kind = e->kind.load(R);
+        const int pid = int(e->pid.load(R));
+        if (state >= kStateCount) {
+            r.problem("rtpu[%u].status: state %u is not a slot state", s, state);
+            continue;
+        }
+        if (kind > std::uint32_t(SlotKind::Host)) r.problem("rtpu[%u].kind is %u, not RTPU or HOST", s, kind);
+        if (!std::memchr(e->name, 0, sizeof e->name)) r.problem("rtpu[%u].name is not NUL-terminated", s);
+        switch (static_cast<SlotState>(state)) {
+        case SlotState::Joining:
+        case SlotState::Running:
+        case SlotState::Leaving:
+            if (pid <= 0) r.problem("rtpu[%u]: %s without a pid", s, state_name(state));
+            else if (!proc_alive(pid, e->pid_start))
+                r.problem("rtpu[%u]: %s but process %d is dead (not recovered yet)", s, state_name(state), pid);
+            if (kind == std::uint32_t(SlotKind::Host)) ++sum->hosts; else ++sum->rtpus;
+            break;
+        case SlotState::Recovering:
+            if (!proc_alive(int(e->recoverer_pid.load(R)), e->recoverer_start_lo, true))
+                r.problem("rtpu[%u]: RECOVERING but its recoverer (process %u) is dead", s, e->recoverer_pid.load(R));
+            ++sum->dead;
+            break;
+        case SlotState::Dead:
+            ++sum->dead;
+            [[fallthrough]];
+        case SlotState::Free:
+            if (pid != 0) r.problem("rtpu[%u]: %s but pid is %d", s, state_name(state), pid);
+            break;
+        }
+        const RingHeader* ring = v.ring(s);
+        if (ring->capacity != v.hdr()->geo.ring_records || ring->record_size != v.hdr()->geo.ring_record_size)
+            r.problem("ring[%u]: capacity %u x %u bytes, the header says %u x %u", s, ring->capacity, ring->record_size,
+                      v.hdr()->geo.ring_records, v.hdr()->geo.ring_record_size);
+        std::snprintf(what, sizeof what, "ring[%u].lock", s);
+        check_lock(v, ring->lock, what, r);
+    }
+}
+
+// Where the payload of `e` may lie.
+bool payload_ok(const View& v, const RegistryEntry* e, std::uint32_t i, Report& r) {
+    const std::uint32_t where = e->where.load(R), off = e->offset.load(R), size = e->size.load(R);
+    const ArenaHeader* a = v.arena_for(where);
+    if (!a) {
+        r.problem("registry[%u].where is %u: neither common memory nor a slot", i, where);
+        return false;
+    }
+    const std::uint32_t lo = v.off_of(a), hi = lo + a->size;
+    if (off < lo + sizeof(ArenaHeader) || off >= hi || size == 0 || size > hi - off) {
+        r.problem("registry[%u].offset %u size %u lies outside %s [%u, %u)", i, off, size,
+                  where == kWhereCommon ? "common memory" : "its RTPU window", lo, hi);
+        return false;
+    }
+    if (!arena_block_used(v, a, off, size)) {
+        r.problem("registry[%u].offset %u is not an allocated block of %u bytes", i, off, size);
+        return false;
+    }
+    return true;
+}
+
+void check_registry(const View& v, Report& r, Summary* sum) {
+    const std::uint32_t cap = v.hdr()->geo.registry_capacity;
+    std::uint32_t live_mask = 0;
+    for (std::uint32_t s = 0; s < v.slots(); ++s) {
+        const auto st = status_state(v.rtpu(s)->status.load(R));
+        if (st == SlotState::Joining || st == SlotState::Running || st == SlotState::Leaving || st == SlotState::Recovering)
+            live_mask |= 1u << s;
+    }
+    for (std::uint32_t i = 0; i < cap; ++i) {
+        const RegistryEntry* e = v.entry(i);
+        if (e->seq.load(R) & 1) r.problem("registry[%u].seq is odd: a change was left half-done", i);
+        const std::uint32_t state = e->state.load(R);
+        if (state > std::uint32_t(EntryState::Destroying)) {
+            r.problem("registry[%u].state is %u, not FREE, LIVE or DESTROYING", i, state);
+            continue;
+        }
+        if (state == std::uint32_t(EntryState::Free)) {
+            if (e->offset.load(R) || e->attached.load(R)) r.problem("registry[%u]: FREE but not cleared", i);
+            continue;
+        }
+        char name[kNameMax + 1];
+        read_name(e, name);
+        const std::uint32_t kind = e->kind.load(R);
+        if (kind == kKindNone || kind >= kKindMax) r.problem("registry[%u].kind is %u: not an object kind", i, kind);
+        std::size_t len;
+        if (!valid_name(name, &len) || reinterpret_cast<const char*>(e->name_words)[kNameMax] != 0)
+            r.problem("registry[%u].name is empty or not NUL-terminated", i);
+        payload_ok(v, e, i, r);
+        const std::uint32_t att = e->attached.load(R);
+        if (att & ~live_mask) r.problem("registry[%u] \"%s\".attached 0x%08x names slots that are not live", i, name, att);
+        if (state == std::uint32_t(EntryState::Destroying)) {
+            ++sum->destroying;
+            if (att == 0) r.problem("registry[%u] \"%s\": destroyed, attached nowhere, yet not freed", i, name);
+            continue;
+        }
+        ++sum->objects;
+        for (std::uint32_t j = 0; j < i; ++j) {
+            const RegistryEntry* o = v.entry(j);
+            char other[kNameMax + 1];
+            read_name(o, other);
+            if (o->state.load(R) == std::uint32_t(EntryState::Live) && std::strcmp(other, name) == 0)
+                r.problem("registry[%u] and registry[%u] are both called \"%s\"", j, i, name);
+        }
+    }
+}
+
+}  // namespace
+
+void Report::problem(const char* fmt, ...) {
+    ++problems;
+    if (!emit) return;
+    char line[400];
+    va_list ap;
+    va_start(ap, fmt);
+    std::vsnprintf(line, sizeof line, fmt, ap);
+    va_end(ap);
+    emit(ctx, line);
+}
+
+void check_backplane(const View& v, Report& r, Summary* sum) {
+    Summary local;
+    if (!sum) sum = &local;
+    const Header* h = v.hdr();
+    check_table(v, r, sum);
+    check_lock(v, h->registry_lock, "header.registry_lock", r);
+    // A live holder may be in the middle of a change: check only a
+    // registry nobody (alive) holds.
+    const std::uint32_t t = h->registry_lock.token.load(R);
+    if (t == 0 || !token_alive(v, t, true)) check_registry(v, r, sum);
+    char name[48];
+    const ArenaHeader* c = v.common_arena();
+    check_lock(v, c->lock, "common.lock", r);
+    arena_check(v, c, h->regions[kRegionCommon].offset, h->geo.common_size, "common", r);
+    sum->common_size = h->geo.common_size - sizeof(ArenaHeader);
+    sum->common_used = c->used_bytes.load(R);
+    for (std::uint32_t s = 0; s < v.slots(); ++s) {
+        const ArenaHeader* a = v.local_arena(s);
+        std::snprintf(name, sizeof name, "local[%u].lock", s);
+        check_lock(v, a->lock, name, r);
+        std::snprintf(name, sizeof name, "local[%u]", s);
+        arena_check(v, a, h->regions[kRegionLocals].offset + s * h->geo.local_window_size, h->geo.local_window_size,
+                    name, r);
+        sum->local_size += h->geo.local_window_size - sizeof(ArenaHeader);
+        sum->local_used += a->used_bytes.load(R);
+    }
+}
+
+}  // namespace chm::bp

@@ -1,0 +1,115 @@
+// The robust backplane lock. The lock word is the holder's token (slot and
+// generation), set by one compare-and-swap, so "locked" and "by whom" can
+// never disagree: a holder killed at any instruction leaves either a free
+// lock or one that names it. A waiter that finds the named holder dead (its
+// slot no longer RUNNING with that generation, or its process gone) robs
+// the lock with a CAS from exactly that token and learns it did
+// (-EOWNERDEAD), together with the holder's dirty flag.
+//
+// Why not the port's byte tas(): a byte can say "taken" but not by whom,
+// and a holder dying between its tas and writing its name would leave a
+// lock nobody can ever prove abandoned. The 32-bit CAS is the same single
+// indivisible read-modify-write bus cycle (`cas.l` on the 68020+,
+// `lock cmpxchg` on x86-64), it just carries the owner's name with it.
+#include <cerrno>
+
+#include <unistd.h>
+
+#include "ipc/backplane/backplane.hpp"
+#include "port.hpp"
+
+namespace chm::bp {
+
+bool slot_holder_dead(const View& v, std::uint32_t slot, std::uint32_t st) {
+    const RtpuEntry* e = v.rtpu(slot);
+    switch (status_state(st)) {
+    case SlotState::Joining:
+    case SlotState::Running:
+    case SlotState::Leaving:
+        return !proc_alive(int(e->pid.load(std::memory_order_relaxed)), e->pid_start);
+    case SlotState::Recovering:
+        return !proc_alive(int(e->recoverer_pid.load(std::memory_order_relaxed)),
+                           e->recoverer_start_lo, true);
+    default:
+        return true;
+    }
+}
+
+bool token_alive(const View& v, std::uint32_t token, bool deep) {
+    const std::uint32_t slot = token_slot(token);
+    if (token == 0) return true;
+    if (slot >= v.slots()) return false;  // garbage: nobody can hold it
+    const std::uint32_t st = v.rtpu(slot)->status.load(std::memory_order_acquire);
+    if ((status_gen(st) & kGenMask) != token_gen(token)) return false;
+    const SlotState s = status_state(st);
+    const bool live = token_recovery(token)
+                          ? s == SlotState::Recovering
+                          : (s == SlotState::Joining || s == SlotState::Running || s == SlotState::Leaving);
+    if (!live) return false;
+    return deep ? !slot_holder_dead(v, slot, st) : true;
+}
+
+static int take(Lock* l, std::uint32_t expected, std::uint32_t me) {
+    if (!l->token.compare_exchange_strong(expected, me, std::memory_order_acquire,
+                                          std::memory_order_relaxed))
+        return -EBUSY;
+    l->owner_task.store(task_word(), std::memory_order_relaxed);
+    return 0;
+}
+
+int lock_try(const View& v, Lock* l, std::uint32_t me) {
+    const std::uint32_t t = l->token.load(std::memory_order_relaxed);
+    if (t == 0) return take(l, 0, me);
+    if (!token_alive(v, t, false) && take(l, t, me) == 0) return -EOWNERDEAD;
+    return -EBUSY;
+}
+
+int lock_acquire(const View& v, Lock* l, std::uint32_t me, std::uint64_t poll_ns,
+                 std::uint64_t timeout_ns) {
+    if (take(l, 0, me) == 0) return 0;  // the uncontended path: one CAS
+    if (poll_ns == 0) poll_ns = 10'000;
+    const std::uint64_t start = port::now_ns();
+    std::uint64_t next_deep = start + 10'000'000;  // ask the kernel about the holder every 10 ms
+    for (unsigned spins = 0;; ++spins) {
+        const std::uint32_t t = l->token.load(std::memory_order_relaxed);
+        if (t == 0) {
+            if (take(l, 0, me) == 0) return 0;
+            continue;
+        }
+        // Cheap check every round; the process check only now and then
+        // (it reads /proc). The monitor threads usually get there first
+        // and turn the slot RECOVERING, which the cheap check sees.
+        const bool busy_phase = (spins & 63) != 0;
+        if (busy_phase) {
+            port::relax();
+            continue;
+        }
+        const std::uint64_t now = port::now_ns();
+        const bool deep = now >= next_deep;
+        if (deep) next_deep = now + 10'000'000;
+        if (!token_alive(v, t, deep) && take(l, t, me) == 0) return -EOWNERDEAD;
+        if (timeout_ns != UINT64_MAX && now - start >= timeout_ns) return -ETIMEDOUT;
+        // Within the first polling interval, spin; after it, test once per
+        // interval and give the CPU away in between.
+        if (now - start >= poll_ns) {
+            std::uint64_t nap = poll_ns;
+            if (timeout_ns != UINT64_MAX && now - start + nap > timeout_ns) nap = timeout_ns - (now - start);
+            relinquish(nap ? nap : 1);
+        }
+    }
+}
+
+void lock_release(Lock* l) {
+    l->owner_task.store(0, std::memory_order_relaxed);
+    l->token.store(0, std::memory_order_release);
+}
+
+void lock_mark_dirty(Lock* l) {
+    l->dirty.store(1, std::memory_order_relaxed);
+    // The flag is visible before any change it announces.
+    std::atomic_thread_fence(std::memory_order_release);
+}
+
+void lock_clear_dirty(Lock* l) { l->dirty.store(0, std::memory_order_release); }
+
+}  // namespace chm::bp

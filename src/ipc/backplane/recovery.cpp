@@ -1,0 +1,163 @@
+// Recovering a dead RTPU slot. Any survivor may find the death (its monitor
+// thread, a locker, a process joining that slot); the one that wins the
+// CAS RUNNING -> RECOVERING for (slot, generation) does the work, under a
+// recovery token of that slot (layout.hpp) that stays "alive" exactly while
+// the slot is RECOVERING and its recoverer lives. If the recoverer dies too,
+// the next survivor takes over; every step below is idempotent.
+//
+// What happens to a dead slot's things (docs/architecture.md, Backplane):
+//  * locks it held: robbed and repaired (arenas rebuilt, half-changed
+//    registry entries finished or undone); user spin-locks it held are
+//    robbed lazily by their next locker, who gets -EOWNERDEAD;
+//  * allocations it never committed: freed;
+//  * its attachments: dropped (a destroyed object it held last is freed);
+//  * named objects it created: kept (they belong to the system, as on
+//    Chimera II, until someone destroys them);
+//  * each object kind's own repair: its registered RecoverFn.
+#include <cerrno>
+#include <ctime>
+
+#include <unistd.h>
+
+#include "ipc/backplane/backplane.hpp"
+
+namespace chm::bp {
+
+namespace {
+
+constexpr auto R = std::memory_order_relaxed;
+
+std::atomic<RecoverFn> g_fns[kKindMax];
+
+// Kinds every survivor must be able to recover, whether or not it used
+// them itself: later subsystems (remote semaphores, message queues) add
+// their entry here.
+struct Builtin {
+    std::uint32_t kind;
+    RecoverFn fn;
+};
+constexpr Builtin kBuiltinRecovery[] = {
+    {kKindNone, nullptr},
+};
+
+RecoverFn recovery_fn(std::uint32_t kind) {
+    if (kind >= kKindMax) return nullptr;
+    if (RecoverFn f = g_fns[kind].load(std::memory_order_acquire)) return f;
+    for (const Builtin& b : kBuiltinRecovery)
+        if (b.kind == kind && b.fn) return b.fn;
+    return nullptr;
+}
+
+// Take over a lock held by the dead slot (token D) for its recovery (token
+// Rt). True when the lock is now ours.
+bool adopt(Lock* l, std::uint32_t d, std::uint32_t rt) {
+    std::uint32_t t = l->token.load(std::memory_order_acquire);
+    if (t == rt) return true;  // a dead recoverer's, now ours
+    return t == d && l->token.compare_exchange_strong(t, rt, std::memory_order_acquire, R);
+}
+
+void nap_ms(unsigned ms) {
+    timespec ts{0, long(ms) * 1000000L};
+    ::nanosleep(&ts, nullptr);
+}
+
+void do_recover(const View& v, std::uint32_t slot, std::uint32_t gen) {
+    const std::uint32_t d = make_token(slot, gen), rt = make_token(slot, gen, true);
+    Header* h = v.hdr();
+
+    // 1. Arenas the dead process held: repair from the chain, release.
+    ArenaHeader* arenas[kMaxSlots + 1];
+    std::uint32_t n = 0;
+    arenas[n++] = v.common_arena();
+    for (std::uint32_t s = 0; s < v.slots(); ++s) arenas[n++] = v.local_arena(s);
+    for (std::uint32_t k = 0; k < n; ++k) {
+        if (!adopt(&arenas[k]->lock, d, rt)) continue;
+        if (arenas[k]->lock.dirty.load(std::memory_order_acquire)) arena_rebuild_locked(v, arenas[k]);
+        lock_clear_dirty(&arenas[k]->lock);
+        lock_release(&arenas[k]->lock);
+    }
+
+    // 2. The registry: adopt it or wait for its live holder; then repair,
+    //    run each kind's recovery and drop the dead slot's attachments.
+    if (!adopt(&h->registry_lock, d, rt)) {
+        while (lock_acquire(v, &h->registry_lock, rt, kInternalPollNs, kInternalTimeoutNs) == -ETIMEDOUT) {
+        }
+    }
+    registry_repair_locked(v, rt);
+    for (std::uint32_t i = 0; i < h->geo.registry_capacity; ++i) {
+        RegistryEntry* e = v.entry(i);
+        const auto st = static_cast<EntryState>(e->state.load(R));
+        if (st == EntryState::Free) continue;
+        if (RecoverFn f = recovery_fn(e->kind.load(R))) f(v, i, slot, gen, rt);
+        registry_detach_locked(v, i, slot, rt);
+    }
+    registry_unlock(v);
+
+    // 3. The slot itself: its name and kind stay for the status display.
+    RtpuEntry* e = v.rtpu(slot);
+    e->pid.store(0, R);
+    e->pid_start = 0;
+    e->tid.store(0, R);
+    e->pending.store(0, R);
+    e->idle.store(0, R);
+    e->urgency.store(0, R);
+    e->poll_ns.store(0, R);
+    e->mailbox.fetch_add(1, R);
+    h->recoveries.fetch_add(1, R);
+    h->last_recovery_ms.store(mono_ms(), R);
+    e->recoverer_pid.store(0, R);
+    e->status.store(make_status(gen, SlotState::Dead), std::memory_order_release);
+}
+
+}  // namespace
+
+int register_recovery(std::uint32_t kind, RecoverFn fn) {
+    if (kind == kKindNone || kind >= kKindMax) return -EINVAL;
+    g_fns[kind].store(fn, std::memory_order_release);
+    return 0;
+}
+
+bool recover_slot(const View& v, std::uint32_t slot, std::uint32_t gen) {
+    if (slot >= v.slots()) return false;
+    RtpuEntry* e = v.rtpu(slot);
+    std::uint32_t st = e->status.load(std::memory_order_acquire);
+    if (status_gen(st) != gen) return false;
+    const std::uint32_t me = static_cast<std::uint32_t>(::getpid());
+    const std::uint32_t me_start = static_cast<std::uint32_t>(self_start_time());
+    switch (status_state(st)) {
+    case SlotState::Joining:
+    case SlotState::Running:
+    case SlotState::Leaving:
+        if (!slot_holder_dead(v, slot, st)) return false;
+        // The recoverer record is read only while RECOVERING; write it
+        // before the CAS so it is never empty then, and again after it in
+        // case a racing loser overwrote it.
+        e->recoverer_start_lo = me_start;
+        e->recoverer_pid.store(me, std::memory_order_release);
+        if (!e->status.compare_exchange_strong(st, make_status(gen, SlotState::Recovering),
+                                               std::memory_order_acq_rel))
+            return false;
+        e->recoverer_start_lo = me_start;
+        e->recoverer_pid.store(me, std::memory_order_release);
+        break;
+    case SlotState::Recovering: {
+        std::uint32_t rp = e->recoverer_pid.load(std::memory_order_acquire);
+        if (!slot_holder_dead(v, slot, st)) return false;
+        // Dead recoverer: confirm after 20 ms (the record may have been a
+        // racing loser's for an instant), then take over.
+        nap_ms(20);
+        if (e->status.load(std::memory_order_acquire) != st || e->recoverer_pid.load(R) != rp ||
+            !slot_holder_dead(v, slot, st))
+            return false;
+        if (!e->recoverer_pid.compare_exchange_strong(rp, me, std::memory_order_acq_rel)) return false;
+        e->recoverer_start_lo = me_start;
+        break;
+    }
+    default:
+        return false;
+    }
+    do_recover(v, slot, gen);
+    return true;
+}
+
+}  // namespace chm::bp

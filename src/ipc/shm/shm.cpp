@@ -1,0 +1,114 @@
+// Global shared memory: a segment is a registry entry of kind kKindShm
+// whose payload is the memory itself. Attach and detach set and clear the
+// process's slot bit in the entry (so a dead or departed slot's
+// attachments are dropped by recovery or leave) and count attaches per
+// process; the data path is the caller's own loads and stores.
+#include <cerrno>
+#include <cstdint>
+
+#include "chimera/bp.h"
+#include "chimera/shm.h"
+#include "ipc/backplane/backplane.hpp"
+
+using namespace chm::bp;
+
+namespace {
+
+Attachment* need_attachment() {
+    Attachment* a = current();
+    if (!a) set_error("not attached to a backplane (chm_bp_join / chm_bp_attach_host first)");
+    return a;
+}
+
+int lock_registry(Attachment* a) {
+    const int r = registry_lock(*a, a->token);
+    if (r) set_error("backplane %s: registry lock: a live holder kept it past the bound", a->path);
+    return r;
+}
+
+}  // namespace
+
+extern "C" {
+
+int chm_shm_create(const char* name, size_t size, int where, void** out) {
+    if (!name || !out || size == 0 || size >= (size_t(1) << 32) - 4096) {
+        set_error("chm_shm_create: NULL name or out, or size %zu out of range", size);
+        return -EINVAL;
+    }
+    Attachment* a = need_attachment();
+    if (!a) return -ENOTCONN;
+    if (where != CHM_SHM_COMMON && (where < 0 || std::uint32_t(where) >= a->slots())) {
+        set_error("chm_shm_create %s: where %d is neither CHM_SHM_COMMON nor an RTPU 0..%u", name, where, a->slots() - 1);
+        return -ECHRNG;
+    }
+    int r = lock_registry(a);
+    if (r) return r;
+    EntryInfo info{};
+    r = registry_create_locked(*a, a->token, kKindShm, name, std::uint32_t(size),
+                               where == CHM_SHM_COMMON ? kWhereCommon : std::uint32_t(where), a->slot, &info);
+    if (r == 0) a->local_refs[info.index] = 1;
+    registry_unlock(*a);
+    switch (r) {
+    case 0: *out = a->base + info.offset; break;
+    case -EEXIST: set_error("chm_shm_create: the name \"%s\" is taken", name); break;
+    case -ENAMETOOLONG: set_error("chm_shm_create: name longer than %u", kNameMax); break;
+    case -ENOMEM: set_error("chm_shm_create %s: no %zu free bytes in %s", name, size, where == CHM_SHM_COMMON ? "common memory" : "that RTPU's window"); break;
+    case -ENOSPC: set_error("chm_shm_create %s: the registry is full (%u entries)", name, a->hdr()->geo.registry_capacity); break;
+    case -ENOTRECOVERABLE: set_error("chm_shm_create %s: that memory was damaged by a process that died in it", name); break;
+    default: set_error("chm_shm_create %s: error %d", name, r); break;
+    }
+    return r;
+}
+
+int chm_shm_attach(const char* name, void** out, size_t* size) {
+    if (!name || !out) return set_error("chm_shm_attach: NULL name or out"), -EINVAL;
+    Attachment* a = need_attachment();
+    if (!a) return -ENOTCONN;
+    int r = lock_registry(a);
+    if (r) return r;
+    const int i = registry_find_locked(*a, name, kKindShm);
+    if (i >= 0) {
+        RegistryEntry* e = a->entry(std::uint32_t(i));
+        e->attached.fetch_or(1u << a->slot, std::memory_order_relaxed);
+        ++a->local_refs[i];
+        *out = a->base + e->offset.load(std::memory_order_relaxed);
+        if (size) *size = e->size.load(std::memory_order_relaxed);
+    }
+    registry_unlock(*a);
+    if (i < 0) return set_error("chm_shm_attach: no shared memory segment \"%s\"", name), -ENOENT;
+    return 0;
+}
+
+int chm_shm_detach(void* addr) {
+    Attachment* a = need_attachment();
+    if (!a) return -ENOTCONN;
+    const char* p = static_cast<const char*>(addr);
+    if (!p || p < a->base || p >= a->base + a->size)
+        return set_error("chm_shm_detach: %p is not in the backplane", addr), -EINVAL;
+    int r = lock_registry(a);
+    if (r) return r;
+    const int i = registry_find_offset_locked(*a, a->off_of(p));
+    r = -EINVAL;
+    if (i >= 0 && a->entry(std::uint32_t(i))->kind.load(std::memory_order_relaxed) == kKindShm && a->local_refs[i]) {
+        if (--a->local_refs[i] == 0) registry_detach_locked(*a, std::uint32_t(i), a->slot, a->token);
+        r = 0;
+    }
+    registry_unlock(*a);
+    if (r) set_error("chm_shm_detach: %p is not a segment attached by this process", addr);
+    return r;
+}
+
+int chm_shm_destroy(const char* name) {
+    if (!name) return set_error("chm_shm_destroy: NULL name"), -EINVAL;
+    Attachment* a = need_attachment();
+    if (!a) return -ENOTCONN;
+    int r = lock_registry(a);
+    if (r) return r;
+    const int i = registry_find_locked(*a, name, kKindShm);
+    if (i >= 0) registry_destroy_locked(*a, std::uint32_t(i), a->token);
+    registry_unlock(*a);
+    if (i < 0) return set_error("chm_shm_destroy: no shared memory segment \"%s\"", name), -ENOENT;
+    return 0;
+}
+
+}  // extern "C"

@@ -1,0 +1,171 @@
+// Multi-process test scaffolding: a private directory per test under
+// /dev/shm, forked children (each bounded, killed and reaped in teardown
+// even when the test fails), pipes to hand-shake with them, and a runner
+// for chimera-bpcheck.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <cerrno>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <ctime>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include <dirent.h>
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "chimera/bp.h"
+
+namespace chm::test {
+
+inline std::uint64_t now_ns() {
+    timespec ts{};
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return std::uint64_t(ts.tv_sec) * 1000000000ull + std::uint64_t(ts.tv_nsec);
+}
+
+inline void sleep_us(unsigned us) {
+    timespec ts{time_t(us / 1000000), long(us % 1000000) * 1000};
+    nanosleep(&ts, nullptr);
+}
+
+// A one-way byte channel between processes.
+struct Pipe {
+    int fd[2] = {-1, -1};
+    Pipe() { EXPECT_EQ(pipe2(fd, O_CLOEXEC), 0); }
+    ~Pipe() {
+        for (int f : fd)
+            if (f >= 0) close(f);
+    }
+    void put(char c) { (void)!write(fd[1], &c, 1); }
+    // The next byte, or -1 after timeout_ms.
+    int get(int timeout_ms = 5000) {
+        pollfd p{fd[0], POLLIN, 0};
+        if (poll(&p, 1, timeout_ms) != 1) return -1;
+        char c;
+        return read(fd[0], &c, 1) == 1 ? c : -1;
+    }
+};
+
+inline chm_bp_config_t small_config() {
+    chm_bp_config_t c;
+    chm_bp_config_init(&c);
+    c.rtpu_slots = 8;
+    c.ring_records = 8;
+    c.ring_record_size = 64;
+    c.local_window_size = 64 * 1024;
+    c.common_size = 256 * 1024;
+    c.registry_capacity = 32;
+    return c;
+}
+
+class IpcTest : public ::testing::Test {
+protected:
+    void SetUp() override {
+        char tmpl[] = "/dev/shm/chm-ipc-XXXXXX";
+        ASSERT_NE(mkdtemp(tmpl), nullptr) << strerror(errno);
+        dir_ = tmpl;
+        path_ = dir_ + "/test.bp";
+    }
+    void TearDown() override {
+        chm_bp_leave();  // -ENOTCONN when not attached
+        for (pid_t p : children_) {
+            kill(p, SIGKILL);
+            waitpid(p, nullptr, 0);
+        }
+        children_.clear();
+        remove_dir();
+    }
+    void remove_dir() {
+        if (DIR* d = opendir(dir_.c_str())) {
+            while (dirent* e = readdir(d))
+                if (std::strcmp(e->d_name, ".") && std::strcmp(e->d_name, ".."))
+                    unlink((dir_ + "/" + e->d_name).c_str());
+            closedir(d);
+        }
+        rmdir(dir_.c_str());
+    }
+    std::vector<std::string> dir_entries() {
+        std::vector<std::string> out;
+        if (DIR* d = opendir(dir_.c_str())) {
+            while (dirent* e = readdir(d))
+                if (std::strcmp(e->d_name, ".") && std::strcmp(e->d_name, "..")) out.push_back(e->d_name);
+            closedir(d);
+        }
+        return out;
+    }
+    void create(const chm_bp_config_t& c = small_config()) {
+        ASSERT_EQ(chm_bp_create(path_.c_str(), &c), 0) << chm_bp_last_error();
+    }
+    // Run fn in a child process; its return value is the exit status.
+    pid_t spawn(const std::function<int()>& fn) {
+        fflush(nullptr);
+        const pid_t p = fork();
+        if (p == 0) {
+            alarm(60);  // a child never outlives a hung test for long
+            _exit(fn());
+        }
+        EXPECT_GT(p, 0);
+        if (p > 0) children_.push_back(p);
+        return p;
+    }
+    // The child's exit status, -SIGNAL if killed, or 1000 on timeout.
+    int reap(pid_t p, int timeout_ms = 20000) {
+        for (int waited = 0;; waited += 1) {
+            int st = 0;
+            const pid_t r = waitpid(p, &st, WNOHANG);
+            if (r == p) {
+                forget(p);
+                return WIFEXITED(st) ? WEXITSTATUS(st) : -WTERMSIG(st);
+            }
+            if (r < 0 || waited >= timeout_ms) return 1000;
+            sleep_us(1000);
+        }
+    }
+    void kill9(pid_t p) {
+        kill(p, SIGKILL);
+        EXPECT_EQ(reap(p), -SIGKILL);
+    }
+    void forget(pid_t p) {
+        for (auto it = children_.begin(); it != children_.end(); ++it)
+            if (*it == p) {
+                children_.erase(it);
+                break;
+            }
+    }
+    // Wait (bounded) until slot s reaches `state` in this process's view.
+    bool wait_slot_state(int s, chm_bp_slot_state state, int timeout_ms = 5000) {
+        const std::uint64_t end = now_ns() + std::uint64_t(timeout_ms) * 1000000u;
+        chm_bp_status_t st;
+        while (now_ns() < end) {
+            if (chm_bp_status(&st) == 0 && st.slot[s].state == state) return true;
+            sleep_us(100);
+        }
+        return false;
+    }
+    // Run chimera-bpcheck on `file`; its output goes to *out.
+    int bpcheck(const std::string& file, std::string* out) {
+        const std::string cmd = std::string(CHM_BPCHECK) + " '" + file + "' 2>&1";
+        FILE* f = popen(cmd.c_str(), "r");
+        if (!f) return -1;
+        char buf[512];
+        out->clear();
+        while (fgets(buf, sizeof buf, f)) *out += buf;
+        const int st = pclose(f);
+        return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+    }
+
+    std::string dir_, path_;
+    std::vector<pid_t> children_;
+};
+
+}  // namespace chm::test
