@@ -4,6 +4,7 @@
 // arrived while the mask was held (irq_restore's pending hook).
 #include <cerrno>
 
+#include "err/err_internal.hpp"
 #include "kernel.hpp"
 
 namespace chm::kernel {
@@ -124,14 +125,6 @@ void schedule_locked() {
 
 int block_current_locked() {
     Tcb* cur = g_k.current;
-    if (g_k.in_irq) {
-        // An interrupt handler may not wait: undo the block, refuse.
-        waitq_remove_locked(cur);
-        timer_cancel_locked(&cur->tmr);
-        cur->interruptible = false;
-        cur->state = TaskState::Running;
-        return -EPERM;
-    }
     schedule_locked();
     return cur->wait_result;
 }
@@ -153,6 +146,8 @@ void deliver_pending_locked() {
                 act = cur->on_deadline(&info, cur->on_deadline_arg);
                 port::irq_disable();
                 cur->s.priority = own_prio;
+            } else {
+                err_deadline_missed_locked(info);  // a kernel error signal
             }
             if (act == CHM_DL_STOP_RTPU) {
                 port::irq_restore();
@@ -181,9 +176,7 @@ void deliver_pending_locked() {
 }
 
 void reschedule_locked() {
-    // In an interrupt handler the switch waits until the handler returns
-    // (the tick that ran it checks must_switch_locked).
-    if (!g_k.current || g_k.in_irq) return;
+    if (!g_k.current) return;
     schedule_locked();
     deliver_pending_locked();
 }
@@ -200,7 +193,6 @@ void preempted_from_trampoline() {
 // A tick that landed while the mask was held; runs with the mask held.
 void pending_tick() {
     const std::uint64_t now = now_locked();
-    irq_dispatch_locked();
     timers_run_locked(now);
     timer_program_locked(now);
     if (g_k.current && must_switch_locked(now)) {
@@ -214,7 +206,6 @@ bool tick_from_signal(std::uint64_t now) {
     g_k.now_cache = now;
     if (!g_k.cfg.cpu_accounting) charge_current_locked(now);  // statistical
     g_k.armed_at = 0;
-    irq_dispatch_locked();
     timers_run_locked(now);
     timer_program_locked(now);
     return g_k.current && must_switch_locked(now);

@@ -4,6 +4,7 @@
 #include <cstring>
 #include <sys/mman.h>
 
+#include "err/err_internal.hpp"
 #include "kernel.hpp"
 #include "kernel/mem/heap.hpp"
 
@@ -39,15 +40,14 @@ int idle_loop_locked() {
         if (g_k.stopping) return g_k.stop_code;
         if (g_k.alive == 0) return 0;
         const std::uint64_t now = now_locked();
-        irq_dispatch_locked();
         if (g_k.cfg.virtual_clock) timers_run_locked(now);
         Tcb* head = sched_pick_locked(now);
         if (head) {
-            if (io_watching_locked()) io_busy_arm_locked(now);
+            if (g_k.io_waiters.head) io_busy_arm_locked(now);
             schedule_locked();  // switches to it; returns when idle again
             continue;
         }
-        if (io_watching_locked()) {
+        if (g_k.io_waiters.head) {
             io_idle_wait_locked();  // real time passes, also on the virtual clock
             continue;
         }
@@ -117,6 +117,7 @@ int chm_kernel_init(const chm_kernel_config_t* cfg) {
         port::irq_set_pending_hook(nullptr);
         port::set_kernel_thread(true);
     }
+    if (int e = err_kernel_init()) return e;  // processor exceptions (err/fault.cpp)
     g_k.initialised = true;
     return 0;
 }
@@ -181,7 +182,7 @@ void chm_kernel_fini(void) {
     }
     port::irq_set_pending_hook(nullptr);
     port::chm_port_preempt_hook = nullptr;
-    irq_reset();
+    err_kernel_fini();
     // Keep the reserved TCB array and the heaps' storage for a next init;
     // reset everything else.
     Tcb* tcbs = g_k.tcbs;

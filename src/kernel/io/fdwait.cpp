@@ -36,9 +36,6 @@ int poll_for(pollfd* fds, std::size_t n, std::int64_t timeout_ns) {
     return ::ppoll(fds, nfds_t(n), limit, nullptr);
 }
 
-// Parked tasks' descriptors first, then the bound IRQ lines'.
-std::size_t g_task_fds = 0;
-
 std::size_t gather_locked() {
     std::size_t k = 0;
     for (Tcb* t = g_k.io_waiters.head; t; t = t->wnext) {
@@ -48,8 +45,7 @@ std::size_t gather_locked() {
             ++k;
         }
     }
-    g_task_fds = k;
-    return k + irq_gather_fds_locked(g_polled + k, kMaxPolled - k);
+    return k;
 }
 
 // Hand poll's results back to their tasks; wake each task with a ready one.
@@ -66,7 +62,6 @@ void scatter_locked() {
         if (ready) wake_locked(t, ready);
         t = next;
     }
-    irq_scatter_fds_locked(g_polled + g_task_fds, kMaxPolled - g_task_fds);
 }
 
 }  // namespace
@@ -78,8 +73,7 @@ void io_poll_locked() {
 
 void io_tick_locked(std::uint64_t now) {
     io_poll_locked();
-    irq_dispatch_locked();  // lines the poll raised
-    if (io_watching_locked()) timer_add_locked(&g_k.io_tmr, now + g_k.cfg.io_poll_ns);
+    if (g_k.io_waiters.head) timer_add_locked(&g_k.io_tmr, now + g_k.cfg.io_poll_ns);
 }
 
 void io_busy_arm_locked(std::uint64_t now) {
