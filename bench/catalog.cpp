@@ -170,6 +170,8 @@ constexpr RowInfo kRows[] = {
     {"peer_timer_settime", "ns", nullptr, kNull, none, "timer_settime re-arming a POSIX timer"},
     {"peer_signal_self", "ns", nullptr, kNull, none,
      "tgkill to the calling thread, handler runs, returns"},
+    {"peer_timer_signal_busy", "ns", nullptr, kNull, none,
+     "POSIX timer signal to a computing thread, empty handler: time stolen per expiry"},
     {"peer_rt_sigwaittest_same_core", "ns", nullptr, kNull, none,
      "rt-tests sigwaittest -f: signal wake latency between processes, one core"},
     {"peer_rt_sigwaittest_xcore", "ns", nullptr, kNull, none,

@@ -145,6 +145,14 @@ Stats Session::time_ops(const std::string& row, const std::string& config,
 
 Stats Session::time_custom(const std::string& row, const std::string& config,
                            const std::function<double(std::uint64_t)>& body, double ops_per_iter) {
+    const Stats st = measure(body, ops_per_iter);
+    std::string how = "median of " + std::to_string(st.runs) + " runs x " +
+                      std::to_string(st.iters_per_run) + (ops_per_iter == 1 ? " ops" : " iterations");
+    emit(row, config.empty() ? how : config + "; " + how, st.median, st.min, st.max);
+    return st;
+}
+
+Stats Session::measure(const std::function<double(std::uint64_t)>& body, double ops_per_iter) {
     constexpr std::uint64_t kMaxIters = std::uint64_t(1) << 32;
     const double goal = opt_.run_ns;
 
@@ -189,10 +197,6 @@ Stats Session::time_custom(const std::string& row, const std::string& config,
     st.max = per_op.back();
     const std::size_t mid = per_op.size() / 2;
     st.median = per_op.size() % 2 ? per_op[mid] : (per_op[mid - 1] + per_op[mid]) / 2;
-
-    std::string how = "median of " + std::to_string(st.runs) + " runs x " + std::to_string(n) +
-                      (ops_per_iter == 1 ? " ops" : " iterations");
-    emit(row, config.empty() ? how : config + "; " + how, st.median, st.min, st.max);
     return st;
 }
 
@@ -216,6 +220,15 @@ void Session::write_samples(const std::string& row, const std::vector<double>& n
     std::FILE* f = std::fopen(path.c_str(), "w");
     if (!f) fail_errno("open " + path);
     for (double v : ns) std::fprintf(f, "%.0f\n", v);
+    std::fclose(f);
+}
+
+void Session::write_data(const std::string& name, const std::string& json) const {
+    if (opt_.samples_dir.empty()) return;
+    const std::string path = opt_.samples_dir + "/" + name + ".json";
+    std::FILE* f = std::fopen(path.c_str(), "w");
+    if (!f) fail_errno("open " + path);
+    std::fputs(json.c_str(), f);
     std::fclose(f);
 }
 

@@ -102,6 +102,10 @@ public:
     Stats time_custom(const std::string& row, const std::string& config,
                       const std::function<double(std::uint64_t n)>& body, double ops_per_iter = 1);
 
+    // The method of time_custom without emitting a row: for figures that
+    // feed another (a ratio, a scaling curve).
+    Stats measure(const std::function<double(std::uint64_t n)>& body, double ops_per_iter = 1);
+
     // A figure computed some other way (percentiles, a tool's own report).
     void emit(const std::string& row, const std::string& config, double value,
               double min = kNull, double max = kNull);
@@ -113,6 +117,10 @@ public:
     // Raw samples of a distribution row, for plots (written only when the
     // caller asked for them with --samples DIR).
     void write_samples(const std::string& row, const std::vector<double>& ns) const;
+
+    // An experiment's data (JSON text) for run.py's plots and
+    // bench/experiments.json; written only with --samples DIR, as DIR/name.json.
+    void write_data(const std::string& name, const std::string& json) const;
 
 private:
     const Options& opt_;

@@ -1,0 +1,89 @@
+// Table 1, task management: create, destroy, change static priority, and
+// the PERF.md spawn+destroy target. Each row is its own timed loop, run by a
+// driver task of priority 9 on a FIXED-priority kernel; the tasks it spawns
+// have priority 1, so they are made ready but never run. Timing: the
+// harness's method (calibrated runs, median with min–max) on
+// CLOCK_MONOTONIC around batches of 200 operations; the untimed half of
+// each batch (the destroys of a create batch, ...) is excluded.
+#include <vector>
+
+#include "kbench.hpp"
+
+namespace chm::bench {
+namespace {
+
+constexpr int kBatch = 200;
+
+void nop(void*) {}
+
+void task_rows(Session& s) {
+    Session::pin(s.cpu(0));
+    kb::Kernel k;
+    std::vector<chm_tid_t> ids(kBatch);
+    const std::string where = kb::pinned(s) + ", FIXED policy, spawned by a priority-9 task, "
+                              "the new tasks (priority 1) never run; 64 KiB stacks from the warm "
+                              "stack pool (warm-up runs first)";
+    auto spawn_batch = [&] {
+        for (auto& id : ids) id = kb::spawn(nop, nullptr, 1);
+    };
+    auto destroy_batch = [&] {
+        for (auto id : ids)
+            if (chm_task_destroy(id) != 0) throw std::runtime_error("chm_task_destroy failed");
+    };
+    std::function<void()> driver = [&] {
+        s.time_custom("task_create", where + "; batches of 200 chm_task_spawn, destroyed untimed",
+                      [&](std::uint64_t n) {
+                          double t = 0;
+                          for (std::uint64_t i = 0; i < n; ++i) {
+                              const std::uint64_t t0 = mono_ns();
+                              spawn_batch();
+                              t += double(mono_ns() - t0);
+                              destroy_batch();
+                          }
+                          return t;
+                      },
+                      kBatch);
+        s.time_custom("task_destroy",
+                      where + "; batches of 200 chm_task_destroy of ready tasks that never ran "
+                              "(stack back to the pool), spawned untimed",
+                      [&](std::uint64_t n) {
+                          double t = 0;
+                          for (std::uint64_t i = 0; i < n; ++i) {
+                              spawn_batch();
+                              const std::uint64_t t0 = mono_ns();
+                              destroy_batch();
+                              t += double(mono_ns() - t0);
+                          }
+                          return t;
+                      },
+                      kBatch);
+        spawn_batch();
+        int prio = 2;
+        s.time_ops("task_set_priority",
+                   where + "; chm_task_set_priority of one of 200 ready tasks to a new value "
+                           "(dequeued and re-queued in the ready heap)",
+                   [&](std::uint64_t n) {
+                       for (std::uint64_t i = 0; i < n; ++i) {
+                           const std::size_t j = std::size_t(i % kBatch);
+                           if (j == 0) prio = prio == 2 ? 3 : 2;
+                           chm_task_set_priority(ids[j], prio);
+                       }
+                   });
+        destroy_batch();
+        s.time_ops("task_spawn_destroy",
+                   where + "; chm_task_spawn then chm_task_destroy of the same task",
+                   [&](std::uint64_t n) {
+                       for (std::uint64_t i = 0; i < n; ++i)
+                           chm_task_destroy(kb::spawn(nop, nullptr, 1));
+                   });
+    };
+    kb::TaskSpec t;
+    t.priority = 9;
+    kb::spawn_fn(&driver, t);
+    k.run();
+}
+CHM_BENCH_MEASUREMENT(task_rows, "task_create", "task_destroy", "task_set_priority",
+                      "task_spawn_destroy");
+
+}  // namespace
+}  // namespace chm::bench
