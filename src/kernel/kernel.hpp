@@ -62,6 +62,12 @@ struct Tcb {
     struct IoWait* io = nullptr;  // the descriptors it waits on (io/fdwait.cpp)
     TimerNode dl;   // deadline of the current cycle
 
+    // Global error handling (err/): the task's handler set, allocated on
+    // first use; the binary semaphores it holds (sync/sem.cpp), released
+    // with owner-died semantics if it is aborted.
+    struct ErrTask* err = nullptr;
+    void* held = nullptr;
+
     // User signals.
     std::uint32_t sig_pending = 0;
     std::uint32_t sig_blocked = 0;

@@ -31,7 +31,7 @@ int lock_registry(Attachment* a) {
 extern "C" {
 
 int chm_shm_create(const char* name, size_t size, int where, void** out) {
-    if (!name || !out || size == 0 || size >= (size_t(1) << 32) - 4096) {
+    if (!name || !out || size == 0 || std::uint64_t(size) >= (std::uint64_t(1) << 32) - 4096) {
         set_error("chm_shm_create: NULL name or out, or size %zu out of range", size);
         return -EINVAL;
     }

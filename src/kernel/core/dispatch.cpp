@@ -4,6 +4,7 @@
 // arrived while the mask was held (irq_restore's pending hook).
 #include <cerrno>
 
+#include "err/err_internal.hpp"
 #include "kernel.hpp"
 
 namespace chm::kernel {
@@ -145,6 +146,8 @@ void deliver_pending_locked() {
                 act = cur->on_deadline(&info, cur->on_deadline_arg);
                 port::irq_disable();
                 cur->s.priority = own_prio;
+            } else {
+                err_deadline_missed_locked(info);  // a kernel error signal
             }
             if (act == CHM_DL_STOP_RTPU) {
                 port::irq_restore();

@@ -4,6 +4,7 @@
 #include <cstring>
 #include <sys/mman.h>
 
+#include "err/err_internal.hpp"
 #include "kernel.hpp"
 #include "kernel/mem/heap.hpp"
 
@@ -116,6 +117,7 @@ int chm_kernel_init(const chm_kernel_config_t* cfg) {
         port::irq_set_pending_hook(nullptr);
         port::set_kernel_thread(true);
     }
+    if (int e = err_kernel_init()) return e;  // processor exceptions (err/fault.cpp)
     g_k.initialised = true;
     return 0;
 }
@@ -180,6 +182,7 @@ void chm_kernel_fini(void) {
     }
     port::irq_set_pending_hook(nullptr);
     port::chm_port_preempt_hook = nullptr;
+    err_kernel_fini();
     // Keep the reserved TCB array and the heaps' storage for a next init;
     // reset everything else.
     Tcb* tcbs = g_k.tcbs;

@@ -5,6 +5,7 @@
 #include <cstring>
 
 #include "chimera/sem.h"
+#include "err/err_internal.hpp"
 #include "kernel.hpp"
 
 namespace chm::kernel {
@@ -12,6 +13,9 @@ namespace chm::kernel {
 namespace {
 
 constexpr std::uint32_t kMagic = 0x53454d31;  // "SEM1"
+// In flags: its holder was aborted; the next P that takes it reports
+// -EOWNERDEAD (err/, owner-died semantics).
+constexpr std::uint32_t kOwnerDied = 0x80000000u;
 
 struct Sem {
     std::uint32_t magic;
@@ -19,10 +23,40 @@ struct Sem {
     std::uint32_t max;
     std::uint32_t flags;
     WaitQueue waiters;
-    Tcb* holder;  // binary + inherit: who took it last
-    std::uint64_t reserved[2];
+    Tcb* holder;  // binary: who took it and has not given it back
+    // The binary semaphores a task holds, linked from Tcb::held, so that
+    // an aborted task's are released (owner-died semantics).
+    Sem* hnext;
+    Sem* hprev;
 };
 static_assert(sizeof(Sem) <= sizeof(chm_sem_t));
+
+// A binary semaphore changes hands: unlink it from its holder's list and
+// link it to `t` (nullptr: nobody holds it).
+void hold_locked(Sem* m, Tcb* t) {
+    if (Tcb* h = m->holder) {
+        if (m->hprev) m->hprev->hnext = m->hnext;
+        else h->held = m->hnext;
+        if (m->hnext) m->hnext->hprev = m->hprev;
+    }
+    m->holder = t;
+    if (t) {
+        m->hprev = nullptr;
+        m->hnext = static_cast<Sem*>(t->held);
+        if (m->hnext) m->hnext->hprev = m;
+        t->held = m;
+    }
+}
+
+// A successful P of a binary semaphore: take it; report a dead owner once.
+int took_binary_locked(Sem* m, Tcb* t) {
+    hold_locked(m, t);
+    if (m->flags & kOwnerDied) [[unlikely]] {
+        m->flags &= ~kOwnerDied;
+        return -EOWNERDEAD;
+    }
+    return 0;
+}
 
 Sem* as_sem(chm_sem_t* s) {
     auto* m = reinterpret_cast<Sem*>(s);
@@ -81,8 +115,9 @@ int p_slow_locked(Sem* m, std::uint64_t timeout_ns, bool timed) {
         timer_add_locked(&cur->tmr, now + timeout_ns);
         timer_program_locked(now);
     }
-    const int r = block_current_locked();
-    if (r == 0 && (m->flags & CHM_SEM_INHERIT)) m->holder = cur;
+    int r = block_current_locked();
+    if (r == 0 && m->max == 1) r = took_binary_locked(m, cur);
+    else if (r == -EOWNERDEAD) hold_locked(m, cur);  // handed over by an aborted holder
     deliver_pending_locked();
     return r;
 }
@@ -92,7 +127,7 @@ int p_locked(chm_sem_t* s, std::uint64_t timeout_ns, bool timed, bool try_only) 
     if (!m) return -EINVAL;
     if (m->count) [[likely]] {
         --m->count;
-        if (m->flags & CHM_SEM_INHERIT) m->holder = g_k.current;
+        if (m->max == 1) return took_binary_locked(m, g_k.current);
         return 0;
     }
     if (try_only) return -EAGAIN;
@@ -100,6 +135,20 @@ int p_locked(chm_sem_t* s, std::uint64_t timeout_ns, bool timed, bool try_only) 
 }
 
 }  // namespace
+
+void sem_release_held_locked(Tcb* t, bool owner_died) {
+    while (Sem* m = static_cast<Sem*>(t->held)) {
+        hold_locked(m, nullptr);
+        if (!owner_died || m->magic != kMagic) continue;
+        // Give it back as V would, telling the next taker its owner died.
+        if (Tcb* w = m->waiters.head) {
+            wake_locked(w, -EOWNERDEAD);
+        } else {
+            m->flags |= kOwnerDied;
+            if (m->count < m->max) ++m->count;
+        }
+    }
+}
 
 }  // namespace chm::kernel
 
@@ -109,12 +158,10 @@ namespace port = chm::port;
 extern "C" {
 
 int chm_sem_init(chm_sem_t* s, enum chm_sem_kind kind, uint32_t initial, uint32_t flags) {
-    if (!s) return -EINVAL;
-    if (kind != CHM_SEM_BINARY && kind != CHM_SEM_COUNTING) return -EINVAL;
-    if (flags & ~CHM_SEM_INHERIT) return -EINVAL;
-    if ((flags & CHM_SEM_INHERIT) && kind != CHM_SEM_BINARY) return -EINVAL;
     const std::uint32_t max = kind == CHM_SEM_BINARY ? 1 : CHM_SEM_COUNT_MAX;
-    if (initial > max) return -EINVAL;
+    if (!s || (kind != CHM_SEM_BINARY && kind != CHM_SEM_COUNTING) || (flags & ~CHM_SEM_INHERIT) ||
+        ((flags & CHM_SEM_INHERIT) && kind != CHM_SEM_BINARY) || initial > max)
+        return raise_or_return(-EINVAL, "chm_sem_init");
     std::memset(s, 0, sizeof *s);
     auto* m = reinterpret_cast<Sem*>(s);
     m->count = initial;
@@ -127,36 +174,37 @@ int chm_sem_init(chm_sem_t* s, enum chm_sem_kind kind, uint32_t initial, uint32_
 int chm_sem_destroy(chm_sem_t* s) {
     IrqGuard guard;
     Sem* m = as_sem(s);
-    if (!m) return -EINVAL;
+    if (!m) return raise_or_return(-EINVAL, "chm_sem_destroy");
     m->magic = 0;
     while (Tcb* t = m->waiters.head) wake_locked(t, -EIDRM);
     if (m->holder) unlend_locked(m->holder);
+    hold_locked(m, nullptr);
     reschedule_locked();
     return 0;
 }
 
 int chm_sem_p(chm_sem_t* s) {
     IrqGuard guard;
-    return p_locked(s, 0, false, false);
+    return raise_or_return(p_locked(s, 0, false, false), "chm_sem_p");
 }
 
 int chm_sem_p_timed(chm_sem_t* s, uint64_t timeout_ns) {
     IrqGuard guard;
-    return p_locked(s, timeout_ns, true, false);
+    return raise_or_return(p_locked(s, timeout_ns, true, false), "chm_sem_p_timed");
 }
 
 int chm_sem_try_p(chm_sem_t* s) {
     IrqGuard guard;
-    return p_locked(s, 0, false, true);
+    return raise_or_return(p_locked(s, 0, false, true), "chm_sem_try_p");
 }
 
 int chm_sem_v(chm_sem_t* s) {
     IrqGuard guard;
     Sem* m = as_sem(s);
-    if (!m) return -EINVAL;
-    if (m->flags & CHM_SEM_INHERIT) {
-        if (m->holder) unlend_locked(m->holder);
-        m->holder = nullptr;
+    if (!m) return raise_or_return(-EINVAL, "chm_sem_v");
+    if (m->max == 1) {
+        if ((m->flags & CHM_SEM_INHERIT) && m->holder) unlend_locked(m->holder);
+        hold_locked(m, nullptr);
     }
     Tcb* w = m->waiters.head;
     if (!w) [[likely]] {

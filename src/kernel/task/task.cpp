@@ -5,6 +5,7 @@
 #include <new>
 #include <sys/mman.h>
 
+#include "err/err_internal.hpp"
 #include "kernel.hpp"
 
 namespace chm::kernel {
@@ -117,10 +118,11 @@ void deadline_missed_locked(Tcb* t, std::uint64_t now) {
     t->missed_cycle = t->cycle;
     t->missed_deadline = t->s.abs_deadline_ns;
     if (now - t->s.abs_deadline_ns > t->worst_lateness) t->worst_lateness = now - t->s.abs_deadline_ns;
-    if (t->on_deadline) t->miss_pending = true;
+    t->miss_pending = true;  // without a handler: a kernel error signal (err/)
 }
 
 void task_end_locked(Tcb* t) {
+    err_task_ended_locked(t);
     unready_locked(t);
     waitq_remove_locked(t);
     timer_cancel_locked(&t->tmr);
@@ -148,19 +150,19 @@ void chm_task_attr_init(chm_task_attr_t* a) {
 }
 
 int chm_task_spawn(chm_tid_t* out, void (*entry)(void*), void* arg, const chm_task_attr_t* attr) {
-    if (!g_k.initialised) return -EPERM;
-    if (!entry) return -EINVAL;
+    if (!g_k.initialised) return raise_or_return(-EPERM, "chm_task_spawn");
+    if (!entry) return raise_or_return(-EINVAL, "chm_task_spawn");
     chm_task_attr_t a{};
     if (attr) a = *attr;
     std::size_t stack;
-    if (int e = check_attr(a, &stack)) return e;
+    if (int e = check_attr(a, &stack)) return raise_or_return(e, "chm_task_spawn");
     stack = stack_round(stack);
 
     IrqGuard guard;
     if (!tcbs_reserved() || !sched_reserve(g_k.alive + 1) || !g_k.timers.reserve(2 * (g_k.alive + 1)))
-        return -ENOMEM;
+        return raise_or_return(-ENOMEM, "chm_task_spawn");
     unsigned char* lo;
-    if (int e = stacks_reserve(stack, &lo)) return e;
+    if (int e = stacks_reserve(stack, &lo)) return raise_or_return(e, "chm_task_spawn");
     Tcb* t = slot_take_locked();
     if (!t) {
         stacks_release(lo, stack, 0);
@@ -230,7 +232,7 @@ int chm_task_destroy(chm_tid_t id) {
     {
         IrqGuard guard;
         Tcb* t = tcb_lookup(id);
-        if (!t) return -ESRCH;
+        if (!t) return raise_or_return(-ESRCH, "chm_task_destroy");
         if (t != g_k.current) {
             task_end_locked(t);
             task_free_stack(t);
@@ -244,7 +246,7 @@ int chm_task_destroy(chm_tid_t id) {
 int chm_task_suspend(chm_tid_t id) {
     IrqGuard guard;
     Tcb* t = tcb_lookup(id);
-    if (!t) return -ESRCH;
+    if (!t) return raise_or_return(-ESRCH, "chm_task_suspend");
     ++t->suspend_count;
     if (t->state == TaskState::Ready) {
         unready_locked(t);
@@ -259,8 +261,8 @@ int chm_task_suspend(chm_tid_t id) {
 int chm_task_resume(chm_tid_t id) {
     IrqGuard guard;
     Tcb* t = tcb_lookup(id);
-    if (!t) return -ESRCH;
-    if (!t->suspend_count) return -EINVAL;
+    if (!t) return raise_or_return(-ESRCH, "chm_task_resume");
+    if (!t->suspend_count) return raise_or_return(-EINVAL, "chm_task_resume");
     if (--t->suspend_count == 0 && t->state == TaskState::Suspended) {
         make_ready_locked(t);
         reschedule_locked();
@@ -271,7 +273,7 @@ int chm_task_resume(chm_tid_t id) {
 int chm_task_set_priority(chm_tid_t id, int priority) {
     IrqGuard guard;
     Tcb* t = tcb_lookup(id);
-    if (!t) return -ESRCH;
+    if (!t) return raise_or_return(-ESRCH, "chm_task_set_priority");
     if (t->boosted) {
         t->own.priority = priority;  // takes effect when the loan ends
         return 0;
@@ -313,10 +315,10 @@ int chm_task_find(const char* name, chm_tid_t* out) {
 int chm_task_count(void) { return int(g_k.alive); }
 
 int chm_task_status(chm_tid_t id, chm_task_status_t* out) {
-    if (!out) return -EINVAL;
+    if (!out) return raise_or_return(-EINVAL, "chm_task_status");
     IrqGuard guard;
     Tcb* t = tcb_lookup(id);
-    if (!t) return -ESRCH;
+    if (!t) return raise_or_return(-ESRCH, "chm_task_status");
     if (t == g_k.current) charge_current_locked(now_locked());
     *out = chm_task_status_t{};
     out->id = id;

@@ -1,0 +1,50 @@
+// The port contract, processor exceptions (part of port.hpp's contract; kept
+// in its own header). A port turns the processor's synchronous exceptions on
+// the kernel thread -- SIGSEGV, SIGBUS, SIGFPE and SIGILL on POSIX -- into a
+// call of the kernel's fault handler, in signal context on the kernel
+// thread's alternate signal stack. The kernel then either fail-stops the
+// process or has the port redirect the interrupted context into a kernel
+// entry, exactly as the preemption trampoline redirects a preempted task:
+// nothing runs on a task stack inside the handler, and no task is ever
+// switched inside it.
+#pragma once
+
+#include <cstdint>
+
+namespace chm::port {
+
+struct FaultInfo {
+    int signo;            // SIGSEGV, SIGBUS, SIGFPE, SIGILL
+    int code;             // si_code (> 0: raised by the processor)
+    std::uintptr_t addr;  // si_addr: the faulting address (or instruction)
+    std::uintptr_t pc;    // the interrupted program counter
+    std::uintptr_t sp;    // the interrupted stack pointer
+};
+
+// Called in signal context on the kernel thread, on the alternate signal
+// stack, with every other signal blocked. It must either not return
+// (fail-stop: write a diagnostic, _exit) or call
+// redirect_to_call_from_signal() on `ucontext` before returning.
+using FaultHandler = void (*)(const FaultInfo& f, void* ucontext);
+
+// Install the handler for the four signals (SA_SIGINFO | SA_ONSTACK) and
+// make the calling thread the one whose faults it sees; give that thread an
+// alternate signal stack if it has none (a virtual-clock kernel has no
+// timer, whose stack it would otherwise share). Faults on other threads go
+// to the action installed before (the default: the process dies with the
+// signal). Returns 0 or -errno. Kernel thread, once per kernel init.
+int fault_init(FaultHandler handler);
+// Restore the actions found by fault_init.
+void fault_fini();
+// True on the thread that called fault_init. Any context.
+bool on_fault_thread();
+
+// Rewrite `ucontext` so that, after the handler returns, the interrupted
+// thread calls `fn()` (which never returns) with the stack pointer at
+// `sp` (aligned by the port as for a call), or, with sp == 0, on the
+// interrupted stack below its red zone. The processor's flags and FP
+// control state are reset to the ABI's defaults at a call. Per target, in
+// <arch>/fault.cpp.
+void redirect_to_call_from_signal(void* ucontext, void (*fn)(), std::uintptr_t sp);
+
+}  // namespace chm::port
