@@ -3,6 +3,7 @@
 #define CHIMERA_H
 
 #include "chimera/io.h"
+#include "chimera/irq.h"
 #include "chimera/kernel.h"
 #include "chimera/program.h"
 #include "chimera/sched.h"

@@ -169,6 +169,7 @@ struct Kernel {
     Tcb* current = nullptr;     // the running task; nullptr = kernel/idle
     port::Context idle_ctx;     // chm_kernel_run's own context
     Tcb* zombie = nullptr;      // ended task whose stack is freed after the switch
+    bool in_irq = false;        // an interrupt handler runs (irq/irq.cpp): no switch
 
     // Scheduling.
     const chm_sched_ops_t* ops = nullptr;
@@ -252,7 +253,20 @@ int block_current_locked();
 void deliver_pending_locked();
 void charge_current_locked(std::uint64_t now);
 
+// ---- interrupts (irq/irq.cpp)
+// Deliver every raised, enabled vector to its handler. Mask held; kernel
+// thread (signal handler, pending tick or idle loop).
+void irq_dispatch_locked();
+bool irq_fds_bound_locked();
+// The bound line descriptors, as pollfds (a quiet line polls fd -1), and
+// their results back (raising the lines that are ready).
+std::size_t irq_gather_fds_locked(struct pollfd* out, std::size_t room);
+void irq_scatter_fds_locked(const struct pollfd* in, std::size_t n);
+void irq_reset();
+
 // ---- blocking UNIX calls (io/fdwait.cpp)
+// Anything for the idle loop to watch: parked tasks or bound IRQ lines.
+inline bool io_watching_locked() { return g_k.io_waiters.head || irq_fds_bound_locked(); }
 // Poll every parked task's descriptors without waiting; wake those ready.
 void io_poll_locked();
 // The IoPoll timer fired (any context, mask held): poll, re-arm if needed.

@@ -125,6 +125,14 @@ void schedule_locked() {
 
 int block_current_locked() {
     Tcb* cur = g_k.current;
+    if (g_k.in_irq) {
+        // An interrupt handler may not wait: undo the block, refuse.
+        waitq_remove_locked(cur);
+        timer_cancel_locked(&cur->tmr);
+        cur->interruptible = false;
+        cur->state = TaskState::Running;
+        return -EPERM;
+    }
     schedule_locked();
     return cur->wait_result;
 }
@@ -176,7 +184,9 @@ void deliver_pending_locked() {
 }
 
 void reschedule_locked() {
-    if (!g_k.current) return;
+    // In an interrupt handler the switch waits until the handler returns
+    // (the tick that ran it checks must_switch_locked).
+    if (!g_k.current || g_k.in_irq) return;
     schedule_locked();
     deliver_pending_locked();
 }
@@ -193,6 +203,7 @@ void preempted_from_trampoline() {
 // A tick that landed while the mask was held; runs with the mask held.
 void pending_tick() {
     const std::uint64_t now = now_locked();
+    irq_dispatch_locked();
     timers_run_locked(now);
     timer_program_locked(now);
     if (g_k.current && must_switch_locked(now)) {
@@ -206,6 +217,7 @@ bool tick_from_signal(std::uint64_t now) {
     g_k.now_cache = now;
     if (!g_k.cfg.cpu_accounting) charge_current_locked(now);  // statistical
     g_k.armed_at = 0;
+    irq_dispatch_locked();
     timers_run_locked(now);
     timer_program_locked(now);
     return g_k.current && must_switch_locked(now);

@@ -40,14 +40,15 @@ int idle_loop_locked() {
         if (g_k.stopping) return g_k.stop_code;
         if (g_k.alive == 0) return 0;
         const std::uint64_t now = now_locked();
+        irq_dispatch_locked();
         if (g_k.cfg.virtual_clock) timers_run_locked(now);
         Tcb* head = sched_pick_locked(now);
         if (head) {
-            if (g_k.io_waiters.head) io_busy_arm_locked(now);
+            if (io_watching_locked()) io_busy_arm_locked(now);
             schedule_locked();  // switches to it; returns when idle again
             continue;
         }
-        if (g_k.io_waiters.head) {
+        if (io_watching_locked()) {
             io_idle_wait_locked();  // real time passes, also on the virtual clock
             continue;
         }
@@ -183,6 +184,7 @@ void chm_kernel_fini(void) {
     port::irq_set_pending_hook(nullptr);
     port::chm_port_preempt_hook = nullptr;
     err_kernel_fini();
+    irq_reset();
     // Keep the reserved TCB array and the heaps' storage for a next init;
     // reset everything else.
     Tcb* tcbs = g_k.tcbs;

@@ -36,6 +36,9 @@ int poll_for(pollfd* fds, std::size_t n, std::int64_t timeout_ns) {
     return ::ppoll(fds, nfds_t(n), limit, nullptr);
 }
 
+// Parked tasks' descriptors first, then the bound IRQ lines'.
+std::size_t g_task_fds = 0;
+
 std::size_t gather_locked() {
     std::size_t k = 0;
     for (Tcb* t = g_k.io_waiters.head; t; t = t->wnext) {
@@ -45,7 +48,8 @@ std::size_t gather_locked() {
             ++k;
         }
     }
-    return k;
+    g_task_fds = k;
+    return k + irq_gather_fds_locked(g_polled + k, kMaxPolled - k);
 }
 
 // Hand poll's results back to their tasks; wake each task with a ready one.
@@ -62,6 +66,7 @@ void scatter_locked() {
         if (ready) wake_locked(t, ready);
         t = next;
     }
+    irq_scatter_fds_locked(g_polled + g_task_fds, kMaxPolled - g_task_fds);
 }
 
 }  // namespace
@@ -73,7 +78,8 @@ void io_poll_locked() {
 
 void io_tick_locked(std::uint64_t now) {
     io_poll_locked();
-    if (g_k.io_waiters.head) timer_add_locked(&g_k.io_tmr, now + g_k.cfg.io_poll_ns);
+    irq_dispatch_locked();  // lines the poll raised
+    if (io_watching_locked()) timer_add_locked(&g_k.io_tmr, now + g_k.cfg.io_poll_ns);
 }
 
 void io_busy_arm_locked(std::uint64_t now) {

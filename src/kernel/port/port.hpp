@@ -159,6 +159,10 @@ int timer_signal();
 // Any context.
 bool on_kernel_thread();
 void set_kernel_thread(bool on);
+// The kernel thread's process and thread ids, the target of a directed
+// signal (a doorbell ring); tid 0 when no timer is live (virtual clock).
+int kernel_pid();
+int kernel_tid();
 
 // Number of timer signals that reached a thread other than the kernel thread
 // (they are ignored; a test proves this stays zero).
@@ -228,23 +232,55 @@ int preemptible_object_add(const void* addr);
 void preemptible_object_remove(const void* addr);
 inline constexpr std::uint64_t kPreemptRetryNs = 20000;
 
+// ------------------------------------------------------------- doorbell
+
+// How other threads and processes interrupt an RTPU (its mailbox
+// interrupts) and how it sleeps. Three 32-bit words, in the process's own
+// memory by default, or in the backplane's RTPU entry so that other
+// processes can ring them.
+enum DoorbellState : std::uint32_t {
+    kDbRunning = 0,     // running tasks: a ring sends the directed signal
+    kDbSleeping = 1,    // in FUTEX_WAIT on `seq`: a ring wakes the futex
+    kDbPolling = 2,     // spinning on `pending` before sleeping: nothing to do
+    kDbSleepingFds = 3  // in ppoll on parked descriptors: a ring sends the signal
+};
+struct Doorbell {
+    std::uint32_t* pending = nullptr;  // raised mailbox vectors, one bit each
+    std::uint32_t* seq = nullptr;      // futex word, bumped by every ring and tick
+    std::uint32_t* state = nullptr;    // DoorbellState
+    bool shared = false;               // a futex shared between processes
+};
+
+// Make `db` this RTPU's doorbell (nullptr: back to the private default).
+// Bits already pending in the old one move over. Kernel thread, mask held.
+void doorbell_use(const Doorbell* db);
+// This RTPU's doorbell, for publishing to others (read-only use).
+const Doorbell& doorbell();
+// Take the pending vectors (cleared). Any context on the kernel thread.
+std::uint32_t doorbell_take();
+// Raise `bits` on the RTPU behind `db` whose kernel thread is `tid` of
+// process `pid`, and wake it as its state requires (futex wake, directed
+// timer signal, or nothing while it polls). Any thread or process; async-
+// signal-safe.
+void doorbell_ring(const Doorbell& db, std::uint32_t bits, int pid, int tid);
+
 // ------------------------------------------------------------------ idle
 
-// Sleep until the timer fires or wake() is called, using no CPU. Called by
-// the kernel's idle loop with the mask held and nothing ready; returns with
-// the mask held. A wake() or tick that happens between the caller's check and
-// the sleep is not lost.
-void idle_wait_locked();
+// Sleep until the timer fires or the doorbell rings, using no CPU after
+// `poll_ns` of polling the doorbell (0: sleep at once). Called by the
+// kernel's idle loop with the mask held and nothing ready; returns with the
+// mask held. A ring or tick that happens between the caller's check and the
+// sleep is not lost.
+void idle_wait_locked(std::uint64_t poll_ns = 0);
 
 // idle_wait_locked() that also returns when one of `fds` is ready (their
 // revents are filled in) or at `until_ns` (monotonic; 0 = no limit).
-// Returns poll's count of ready descriptors, or 0 after a tick, a wake() or
+// Returns poll's count of ready descriptors, or 0 after a tick, a ring or
 // the time limit. The timer signal is blocked from the check to the sleep
 // and unblocked atomically by ppoll, so no tick is lost.
 int idle_wait_fds_locked(struct pollfd* fds, unsigned long nfds, std::uint64_t until_ns);
 
-// Wake an RTPU sleeping in idle_wait_locked() or idle_wait_fds_locked():
-// any thread, signal handler. The latter costs a directed signal.
+// Ring this RTPU's own doorbell with no vector: any thread, signal handler.
 void idle_wake();
 
 }  // namespace chm::port

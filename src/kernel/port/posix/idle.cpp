@@ -1,6 +1,7 @@
-// Idle: sleep on a futex word until the timer signal or a wake-up bumps it;
-// with tasks parked in blocking UNIX calls, sleep in ppoll on their
-// descriptors instead.
+// Idle and the doorbell: the kernel thread sleeps on the doorbell's futex
+// word until the timer signal or a ring bumps it; with tasks parked in
+// blocking UNIX calls it sleeps in ppoll on their descriptors instead, and
+// a ring reaches it by a directed signal.
 #include "port.hpp"
 #include "posix_internal.hpp"
 
@@ -13,35 +14,82 @@
 
 namespace chm::port {
 
-std::uint32_t g_wake_seq = 0;
-
 namespace {
-// 1 while the kernel thread sleeps in ppoll: a futex wake cannot reach it
-// there, so idle_wake() sends it the timer signal instead.
-std::uint32_t g_idle_polling = 0;
+
+std::uint32_t g_own_pending = 0, g_own_seq = 0, g_own_state = kDbRunning;
+const Doorbell kOwnDoorbell{&g_own_pending, &g_own_seq, &g_own_state, false};
+Doorbell g_db = kOwnDoorbell;
+
+std::uint32_t load(const std::uint32_t* w) { return __atomic_load_n(w, __ATOMIC_SEQ_CST); }
+void store(std::uint32_t* w, std::uint32_t v) { __atomic_store_n(w, v, __ATOMIC_SEQ_CST); }
+
+void futex(std::uint32_t* w, int op, std::uint32_t val, bool shared) {
+    syscall(SYS_futex, w, shared ? op : (op | FUTEX_PRIVATE_FLAG), val, nullptr, nullptr, 0);
+}
+
 }  // namespace
 
-void idle_wait_locked() {
-    const std::uint32_t seen = __atomic_load_n(&g_wake_seq, __ATOMIC_ACQUIRE);
-    if (g_irq.pending) return;
-    // The timer handler bumps g_wake_seq when it records a pending tick, so a
-    // tick between the test above and the sleep makes FUTEX_WAIT return at
-    // once; one that arrives during the sleep interrupts it with EINTR.
-    syscall(SYS_futex, &g_wake_seq, FUTEX_WAIT_PRIVATE, seen, nullptr, nullptr, 0);
+void doorbell_bump_from_signal() { __atomic_fetch_add(g_db.seq, 1, __ATOMIC_SEQ_CST); }
+
+void doorbell_use(const Doorbell* db) {
+    const std::uint32_t moved = __atomic_exchange_n(g_db.pending, 0, __ATOMIC_SEQ_CST);
+    g_db = db ? *db : kOwnDoorbell;
+    store(g_db.state, kDbRunning);
+    if (moved) __atomic_fetch_or(g_db.pending, moved, __ATOMIC_SEQ_CST);
+}
+
+const Doorbell& doorbell() { return g_db; }
+
+std::uint32_t doorbell_take() {
+    if (!load(g_db.pending)) return 0;  // the common case: no atomic write
+    return __atomic_exchange_n(g_db.pending, 0, __ATOMIC_SEQ_CST);
+}
+
+void doorbell_ring(const Doorbell& db, std::uint32_t bits, int pid, int tid) {
+    if (bits) __atomic_fetch_or(db.pending, bits, __ATOMIC_SEQ_CST);
+    __atomic_fetch_add(db.seq, 1, __ATOMIC_SEQ_CST);
+    switch (load(db.state)) {
+    case kDbSleeping:
+        futex(db.seq, FUTEX_WAKE, 1, db.shared);
+        break;
+    case kDbPolling:
+        break;  // it sees `pending` or `seq` change within its poll
+    default:    // running tasks, or asleep in ppoll: interrupt it
+        if (tid > 0) syscall(SYS_tgkill, pid, tid, timer_signal());
+        break;
+    }
+}
+
+void idle_wait_locked(std::uint64_t poll_ns) {
+    const std::uint32_t seen = load(g_db.seq);
+    if (g_irq.pending || load(g_db.pending)) return;
+    if (poll_ns) {
+        // Stay in user space a little: a ring from a busy peer then costs
+        // no system call on either side.
+        store(g_db.state, kDbPolling);
+        const std::uint64_t end = now_ns() + poll_ns;
+        while (load(g_db.seq) == seen && !g_irq.pending && now_ns() < end) relax();
+    }
+    store(g_db.state, kDbSleeping);
+    // The timer handler and every ring bump `seq`, so one that comes after
+    // `seen` was read makes FUTEX_WAIT return at once; one during the sleep
+    // wakes it (a ring) or interrupts it with EINTR (the timer).
+    if (load(g_db.seq) == seen && !g_irq.pending) futex(g_db.seq, FUTEX_WAIT, seen, g_db.shared);
+    store(g_db.state, kDbRunning);
 }
 
 int idle_wait_fds_locked(pollfd* fds, unsigned long nfds, std::uint64_t until_ns) {
-    const std::uint32_t seen = __atomic_load_n(&g_wake_seq, __ATOMIC_ACQUIRE);
+    const std::uint32_t seen = load(g_db.seq);
     sigset_t block, during;
     sigemptyset(&block);
     sigaddset(&block, timer_signal());
     pthread_sigmask(SIG_BLOCK, &block, &during);
     sigdelset(&during, timer_signal());
-    __atomic_store_n(&g_idle_polling, 1, __ATOMIC_SEQ_CST);
+    store(g_db.state, kDbSleepingFds);
     int ready = 0;
-    // A tick or wake() from here on is either seen by this test or kept
+    // A tick or ring from here on is either seen by this test or kept
     // pending (signal blocked) until ppoll unblocks it atomically.
-    if (!g_irq.pending && __atomic_load_n(&g_wake_seq, __ATOMIC_SEQ_CST) == seen) {
+    if (!g_irq.pending && !load(g_db.pending) && load(g_db.seq) == seen) {
         timespec ts{};
         timespec* limit = nullptr;
         if (until_ns) {
@@ -54,18 +102,11 @@ int idle_wait_fds_locked(pollfd* fds, unsigned long nfds, std::uint64_t until_ns
         const int r = ppoll(fds, nfds, limit, &during);
         if (r > 0) ready = r;
     }
-    __atomic_store_n(&g_idle_polling, 0, __ATOMIC_SEQ_CST);
+    store(g_db.state, kDbRunning);
     pthread_sigmask(SIG_UNBLOCK, &block, nullptr);
     return ready;
 }
 
-void idle_wake() {
-    __atomic_fetch_add(&g_wake_seq, 1, __ATOMIC_SEQ_CST);
-    if (__atomic_load_n(&g_idle_polling, __ATOMIC_SEQ_CST) && g_kernel_tid) {
-        syscall(SYS_tgkill, getpid(), g_kernel_tid, timer_signal());
-        return;
-    }
-    syscall(SYS_futex, &g_wake_seq, FUTEX_WAKE_PRIVATE, 1, nullptr, nullptr, 0);
-}
+void idle_wake() { doorbell_ring(g_db, 0, getpid(), g_kernel_tid); }
 
 }  // namespace chm::port

@@ -5,8 +5,9 @@
 
 namespace chm::port {
 
-// Bumped by the timer handler and idle_wake(); idle sleeps on it.
-extern std::uint32_t g_wake_seq;
+// The timer handler bumps the doorbell's futex word when it records a
+// pending tick, so an idle loop about to sleep on it returns at once.
+void doorbell_bump_from_signal();
 
 // The kernel thread's id (for directed signals); 0 before timer_init.
 extern int g_kernel_tid;

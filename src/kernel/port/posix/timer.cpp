@@ -38,7 +38,7 @@ void on_timer(int, siginfo_t*, void* ucontext) {
     const int saved_errno = errno;
     if (g_irq.nest != 0) {
         g_irq.pending = 1;
-        __atomic_fetch_add(&g_wake_seq, 1, __ATOMIC_RELEASE);
+        doorbell_bump_from_signal();
     } else {
         g_irq.nest = 1;
         __atomic_signal_fence(__ATOMIC_SEQ_CST);
@@ -82,6 +82,8 @@ int timer_signal() { return SIGRTMIN + 2; }
 
 bool on_kernel_thread() { return t_kernel_thread; }
 void set_kernel_thread(bool on) { t_kernel_thread = on; }
+int kernel_pid() { return getpid(); }
+int kernel_tid() { return g_kernel_tid; }
 
 void irq_restore_no_switch() {
     __atomic_signal_fence(__ATOMIC_SEQ_CST);
