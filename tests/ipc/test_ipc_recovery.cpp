@@ -114,8 +114,12 @@ TEST_F(IpcRecovery, RegistryLockHeldByDeadProcessIsRecovered) {
     ASSERT_EQ(chm_bp_status(&st), 0);
     const std::uint32_t free0 = st.common_free;
     // The named points where the child dies, all with the registry lock held.
-    enum Point { kJustLocked, kAllocatedUncommitted, kEntryHalfWritten, kEntryPublishedUncommitted, kPoints };
-    for (int point = 0; point < kPoints; ++point) {
+    enum Point {
+        kJustLocked, kArenaMidSplit, kAllocatedUncommitted, kEntryHalfWritten, kEntryPublishedUncommitted, kPoints
+    };
+    constexpr int kRepeats = 25;
+    for (int run = 0; run < kPoints * kRepeats; ++run) {
+        const int point = run % kPoints;
         SCOPED_TRACE(point);
         Pipe ready;
         const pid_t c = spawn([&] {
@@ -123,6 +127,19 @@ TEST_F(IpcRecovery, RegistryLockHeldByDeadProcessIsRecovered) {
             const bp::Attachment& a = *bp::current();
             if (bp::registry_lock(a, a.token)) return 2;
             bp::lock_mark_dirty(&a.hdr()->registry_lock);
+            if (point == kArenaMidSplit) {
+                // Holding the arena lock, dirty, with a split half done:
+                // the tail's header written inside the free block, the
+                // block itself not yet shrunk.
+                bp::ArenaHeader* ar = a.common_arena();
+                if (bp::arena_lock(a, ar, a.token)) return 3;
+                bp::lock_mark_dirty(&ar->lock);
+                const std::uint32_t b = ar->free_head.load();
+                auto* tail = a.at<bp::BlockHeader>(b + 256);
+                tail->size_flags = 4096;
+                tail->prev_size = 256;
+                tail->tag = (b + 256) ^ bp::kBlockTagXor;
+            }
             if (point >= kAllocatedUncommitted) {
                 bp::ArenaHeader* ar = a.common_arena();
                 if (bp::arena_lock(a, ar, a.token)) return 3;
@@ -180,7 +197,8 @@ TEST_F(IpcRecovery, KilledWhileCreatingAndDestroyingLeavesAConsistentFile) {
     ASSERT_EQ(chm_bp_status(&st), 0);
     const std::uint32_t free0 = st.common_free;
     unsigned seed = 12345;
-    for (int round = 0; round < 20; ++round) {
+    int held_registry = 0, held_arena = 0;
+    for (int round = 0; round < 100; ++round) {
         Pipe ready;
         const pid_t c = spawn([&] {
             if (chm_bp_join(path_.c_str(), 1, nullptr)) return 1;
@@ -196,12 +214,24 @@ TEST_F(IpcRecovery, KilledWhileCreatingAndDestroyingLeavesAConsistentFile) {
         });
         ASSERT_EQ(ready.get(), 'r');
         seed = seed * 1103515245u + 12345u;
-        sleep_us(200 + (seed >> 16) % 5000);
-        kill9(c);
+        sleep_us(100 + (seed >> 16) % 3000);
+        kill(c, SIGKILL);
+        // Did it die holding a lock? (Read before our monitor recovers it.)
+        const bp::Attachment& a = *bp::current();
+        const std::uint32_t rt = a.hdr()->registry_lock.token.load();
+        if (rt && bp::token_slot(rt) == 1 && !bp::token_recovery(rt)) ++held_registry;
+        for (std::uint32_t k = 0; k <= a.slots(); ++k) {
+            const std::uint32_t t = (k == a.slots() ? a.common_arena() : a.local_arena(k))->lock.token.load();
+            if (t && bp::token_slot(t) == 1 && !bp::token_recovery(t)) ++held_arena;
+        }
+        EXPECT_EQ(reap(c), -SIGKILL);
         ASSERT_TRUE(wait_slot_state(1, CHM_BP_DEAD)) << "round " << round;
         const std::string problems = check_now();
         ASSERT_EQ(problems, "") << "round " << round;
     }
+    std::printf("killed 100 times mid-churn: holding the registry lock %d times, an arena lock %d times\n",
+                held_registry, held_arena);
+    EXPECT_GT(held_registry, 0);
     // Whatever survived is consistent and can be cleaned up completely.
     char name[16];
     for (int i = 0; i < 6; ++i) {
