@@ -75,7 +75,11 @@ int chm_bp_attach_host(const char* path, const char* name, int* slot_out);
 
 /* Leave cleanly: stop the monitor thread, drop this process's shared
  * memory attachments, mark the slot FREE and unmap. Objects created by
- * this process stay until destroyed. Errors: -ENOTCONN not attached. */
+ * this process stay until destroyed; locks it still holds pass to their
+ * next locker with -EOWNERDEAD. exit() does this by itself; a process
+ * that is killed or calls _exit() is recovered as dead by the others.
+ * No other thread of the process may use the backplane meanwhile.
+ * Errors: -ENOTCONN not attached. */
 int chm_bp_leave(void);
 
 /* This process's slot, or -ENOTCONN. */

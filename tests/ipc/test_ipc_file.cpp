@@ -56,6 +56,20 @@ TEST_F(IpcFile, CreateJoinLeaveRoundTrip) {
     EXPECT_EQ(st.slot[7].kind, CHM_BP_KIND_HOST);
 }
 
+TEST_F(IpcFile, ExitWithoutLeaveLeavesCleanly) {
+    create();
+    const pid_t c = spawn([&] {
+        if (chm_bp_join(path_.c_str(), 4, nullptr)) return 1;
+        std::exit(0);  // atexit handlers run: a clean leave, not a death
+    });
+    ASSERT_EQ(reap(c), 0);
+    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
+    chm_bp_status_t st;
+    ASSERT_EQ(chm_bp_status(&st), 0);
+    EXPECT_EQ(st.slot[4].state, CHM_BP_FREE);
+    EXPECT_EQ(st.recoveries, 0u);
+}
+
 TEST_F(IpcFile, DefaultPathFollowsEnvironment) {
     char buf[256];
     setenv(CHM_BP_ENV, path_.c_str(), 1);

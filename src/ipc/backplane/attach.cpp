@@ -45,7 +45,13 @@ void after_fork_child() {
     const pthread_mutex_t fresh = PTHREAD_MUTEX_INITIALIZER;  // the parent may have held it
     g_mu = fresh;
 }
-void register_atfork() { ::pthread_atfork(nullptr, nullptr, after_fork_child); }
+// A normal exit() without chm_bp_leave() still leaves cleanly (a crash
+// or _exit is a death, recovered by the survivors).
+void leave_at_exit() { chm_bp_leave(); }
+void register_atfork() {
+    ::pthread_atfork(nullptr, nullptr, after_fork_child);
+    std::atexit(leave_at_exit);
+}
 
 void fill_slot(RtpuEntry* e, SlotKind kind, const char* name) {
     e->pid.store(std::uint32_t(::getpid()), R);
