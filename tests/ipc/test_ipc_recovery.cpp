@@ -47,6 +47,7 @@ TEST_F(IpcRecovery, DeathIsDetectedAndTheSlotRecoveredQuickly) {
         });
         ASSERT_EQ(ready.get(), 'r');
         ASSERT_TRUE(wait_slot_state(3, CHM_BP_RUNNING));
+        sleep_us(30000);  // steady state: the monitor scans new peers every 10 ms
         // Our own pidfd tells when the kernel has finished the exit (the
         // teardown of the child's memory takes milliseconds by itself).
         const int pfd = int(syscall(SYS_pidfd_open, c, 0));

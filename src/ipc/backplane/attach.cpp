@@ -32,9 +32,25 @@ void nap_ms(unsigned ms) {
     ::nanosleep(&ts, nullptr);
 }
 
+// fork() pauses the monitor thread: the process is single-threaded at the
+// fork (no recovery is in flight across it, and qemu-user 7.2 cannot
+// create a thread in a child forked from a multithreaded process).
+bool g_monitor_paused = false;
+void before_fork() {
+    if (!g_attached.load(R)) return;
+    monitor_stop();
+    g_monitor_paused = true;
+}
+void after_fork_parent() {
+    if (!g_monitor_paused) return;
+    g_monitor_paused = false;
+    monitor_start(&g_att);  // on failure lockers still find dead holders themselves
+}
+
 // A forked child does not inherit the attachment: the slot is the
 // parent's, and the monitor thread does not exist in the child.
 void after_fork_child() {
+    g_monitor_paused = false;
     if (!g_attached.load(R)) return;
     monitor_forget_after_fork();
     unmap(&g_att);
@@ -49,7 +65,7 @@ void after_fork_child() {
 // or _exit is a death, recovered by the survivors).
 void leave_at_exit() { chm_bp_leave(); }
 void register_atfork() {
-    ::pthread_atfork(nullptr, nullptr, after_fork_child);
+    ::pthread_atfork(before_fork, after_fork_parent, after_fork_child);
     std::atexit(leave_at_exit);
 }
 

@@ -24,22 +24,38 @@ std::uint32_t mono_ms() {
     return static_cast<std::uint32_t>(std::uint64_t(ts.tv_sec) * 1000u + std::uint64_t(ts.tv_nsec) / 1000000u);
 }
 
+// Relative to a /proc directory descriptor, on purpose: qemu-user fakes
+// the contents of a process's own /proc/<pid>/stat (field 22 among them)
+// when the path names it, but not a path relative to a directory fd, so
+// every process, emulated or not, reads the same start time for a pid.
+static int proc_dir() {
+    static std::atomic<int> s_fd{-1};
+    int fd = s_fd.load(std::memory_order_acquire);
+    if (fd >= 0) return fd;
+    fd = ::open("/proc", O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+    int expected = -1;
+    if (fd >= 0 && !s_fd.compare_exchange_strong(expected, fd)) {
+        ::close(fd);
+        fd = expected;
+    }
+    return fd;
+}
+
 std::uint64_t proc_start_time(int pid) {
     if (pid <= 0) return 0;
-    char path[48];
+    char path[32];
     char buf[1024];
     int n = 0;
     {
         // No stdio: the monitor thread runs this, and stdio may allocate.
-        char* p = path + sizeof "/proc/" - 1;
-        std::memcpy(path, "/proc/", sizeof "/proc/" - 1);
         char digits[16];
         int d = 0;
         for (unsigned v = unsigned(pid); v; v /= 10) digits[d++] = char('0' + v % 10);
+        char* p = path;
         while (d) *p++ = digits[--d];
         std::memcpy(p, "/stat", sizeof "/stat");
     }
-    const int fd = ::open(path, O_RDONLY | O_CLOEXEC);
+    const int fd = ::openat(proc_dir(), path, O_RDONLY | O_CLOEXEC);
     if (fd < 0) return 0;
     n = int(::read(fd, buf, sizeof buf - 1));
     ::close(fd);
