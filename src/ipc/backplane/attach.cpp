@@ -51,6 +51,7 @@ void after_fork_parent() {
 // parent's, and the monitor thread does not exist in the child.
 void after_fork_child() {
     g_monitor_paused = false;
+    proc_after_fork_child();
     if (!g_attached.load(R)) return;
     monitor_forget_after_fork();
     unmap(&g_att);

@@ -102,6 +102,8 @@ void relinquish(std::uint64_t ns);
 // What a lock records as its holder's task: the Chimera task id, or
 // 0x80000000 | Linux thread id outside a task.
 std::uint32_t task_word();
+// In a forked child (the forking thread's cached thread id is stale).
+void proc_after_fork_child();
 
 // --------------------------------------------------------- the robust lock
 

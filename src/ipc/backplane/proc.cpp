@@ -108,9 +108,16 @@ void relinquish(std::uint64_t ns) {
     ::nanosleep(&ts, nullptr);
 }
 
+// The thread id is cached: a system call costs ~1 µs on a virtualised
+// host, more than the whole uncontended lock.
+static thread_local std::uint32_t t_tid = 0;
+
 std::uint32_t task_word() {
     if (in_chimera_task()) return static_cast<std::uint32_t>(chm_task_self());
-    return 0x80000000u | static_cast<std::uint32_t>(::syscall(SYS_gettid));
+    if (!t_tid) t_tid = 0x80000000u | static_cast<std::uint32_t>(::syscall(SYS_gettid));
+    return t_tid;
 }
+
+void proc_after_fork_child() { t_tid = 0; }
 
 }  // namespace chm::bp
