@@ -2,6 +2,7 @@
 #ifndef CHIMERA_H
 #define CHIMERA_H
 
+#include "chimera/err.h"
 #include "chimera/io.h"
 #include "chimera/irq.h"
 #include "chimera/kernel.h"
