@@ -98,6 +98,24 @@ constexpr RowInfo kRows[] = {
      "1 kHz release lateness p99, 200 periodic tasks"},
     {"control_cpu_share_1khz", "%", nullptr, 90, {Target::kValueAtLeast, 90},
      "CPU share left to control tasks running at 1000 Hz (paper: over 90 %)"},
+    // ---- the MUF overload experiment at 150 % utilisation (issue 6 item 4):
+    // % of jobs missing their deadline; the whole ramp is in muf_overload.png
+    {"overload_critical_miss_pct_150_rm", "%", nullptr, kNull, none,
+     "RM at 150 % load: critical jobs missed"},
+    {"overload_noncritical_miss_pct_150_rm", "%", nullptr, kNull, none,
+     "RM at 150 % load: non-critical jobs missed"},
+    {"overload_critical_miss_pct_150_edf", "%", nullptr, kNull, none,
+     "EDF at 150 % load: critical jobs missed"},
+    {"overload_noncritical_miss_pct_150_edf", "%", nullptr, kNull, none,
+     "EDF at 150 % load: non-critical jobs missed"},
+    {"overload_critical_miss_pct_150_mlf", "%", nullptr, kNull, none,
+     "MLF at 150 % load: critical jobs missed"},
+    {"overload_noncritical_miss_pct_150_mlf", "%", nullptr, kNull, none,
+     "MLF at 150 % load: non-critical jobs missed"},
+    {"overload_critical_miss_pct_150_muf", "%", nullptr, kNull, {Target::kValueAtMost, 0},
+     "MUF at 150 % load: critical jobs missed (must be none)"},
+    {"overload_noncritical_miss_pct_150_muf", "%", nullptr, kNull, none,
+     "MUF at 150 % load: non-critical jobs missed"},
 
     // ---- peers: user-space switching
     {"peer_fiber_switch", "ns", nullptr, kNull, none, "Boost.Context fiber resume; one switch"},

@@ -5,8 +5,10 @@ Runs <build>/bench/chimera-bench (it builds nothing: `make bench` builds
 first), shows its table as it goes, and writes
 
   bench/results.json    the measured rows, as chimera-bench wrote them
+  bench/experiments.json  the experiments' data (MUF overload ramp, scaling)
   docs/benchmarks.md    machine header, the table, the rows not measured yet
-  docs/bench/*.png      lateness histogram, ratio and peer bar charts
+  docs/bench/*.png      lateness histogram, ratio and peer bar charts, the MUF
+                        overload experiment, scaling against the task count
 
 Run with Debian's /usr/bin/python3: the plots need python3-matplotlib
 (`make deps-bench`); without it the figures and Markdown are still written.
@@ -157,7 +159,54 @@ def markdown(rows, rest, info, commands, quick, elapsed):
     return out
 
 
-def plots(rows, samples_dir, outdir):
+def experiments_of(samples_dir):
+    """The experiments' data files (DIR/*.json written by chimera-bench)."""
+    out = {}
+    if samples_dir and Path(samples_dir).is_dir():
+        for f in sorted(Path(samples_dir).glob("*.json")):
+            try:
+                out[f.stem] = json.loads(f.read_text())
+            except ValueError as e:
+                print(f"run.py: {f.name}: {e}", file=sys.stderr)
+    return out
+
+
+def experiment_markdown(exps):
+    """Tables of the experiments' data for docs/benchmarks.md."""
+    out = []
+    m = exps.get("muf_overload")
+    if m:
+        us = m["utilisation_pct"]
+        out.extend(["## MUF overload experiment", "",
+                    "8 periodic tasks (10–200 ms), execution times scaled from 50 % to 150 % "
+                    "utilisation, 3 marked critical (35 % of the load); virtual clock, firm "
+                    "deadlines (a late job is dropped), 2 s horizon. Percentage of jobs that "
+                    "missed their deadline, critical / non-critical"
+                    + ("" if m.get("every_job_accounted") else
+                       " (WARNING: some jobs were neither met nor missed)") + ".", "",
+                    "| policy | " + " | ".join(f"{u} %" for u in us) + " |",
+                    "| --- |" + " ---: |" * len(us)])
+        for name, d in m["policies"].items():
+            cells = [f"{c:.0f} / {n:.0f}" for c, n in zip(d["critical_miss_pct"],
+                                                          d["noncritical_miss_pct"])]
+            out.append(f"| {name.upper()} | " + " | ".join(cells) + " |")
+        out.append("")
+    sc = exps.get("scaling_tasks")
+    if sc:
+        ns = sc["tasks"]
+        out.extend(["## Cost against the number of tasks", "",
+                    "Median ns per operation with N ready tasks that never run (see "
+                    "`bench/kernel/scaling.cpp`). RTPU-count and message-size scaling come "
+                    "with the backplane.", "",
+                    "| operation | " + " | ".join(f"N = {n}" for n in ns) + " |",
+                    "| --- |" + " ---: |" * len(ns)])
+        for op, d in sc["ops"].items():
+            out.append(f"| `{op}` | " + " | ".join(human(v, "ns") for v in d["median"]) + " |")
+        out.append("")
+    return out
+
+
+def plots(rows, samples_dir, outdir, exps=None):
     """PNG figures; returns (file name, caption) pairs. Needs matplotlib."""
     try:
         import matplotlib
@@ -229,6 +278,50 @@ def plots(rows, samples_dir, outdir):
         fig.savefig(outdir / "peers.png", dpi=110)
         plt.close(fig)
         made.append(("peers.png", "The peers measured in this run"))
+
+    exps = exps or {}
+    m = exps.get("muf_overload")
+    if m:
+        us = m["utilisation_pct"]
+        fig, axes = plt.subplots(1, 2, figsize=(10, 4), sharey=True)
+        styles = {"rm": "o-", "edf": "s-", "mlf": "^-", "muf": "D-"}
+        for ax, key, title in ((axes[0], "critical_miss_pct", "critical tasks"),
+                               (axes[1], "noncritical_miss_pct", "non-critical tasks")):
+            for name, d in m["policies"].items():
+                ax.plot(us, d[key], styles.get(name, "o-"), label=name.upper(), markersize=4)
+            ax.axvline(100, color="grey", lw=0.8, ls="--")
+            ax.set_title(title)
+            ax.set_xlabel("utilisation (%)")
+            ax.grid(alpha=0.3)
+        axes[0].set_ylabel("jobs missing their deadline (%)")
+        axes[1].legend()
+        fig.suptitle("Transient overload: deadline misses per policy (virtual clock)")
+        fig.tight_layout()
+        fig.savefig(outdir / "muf_overload.png", dpi=110)
+        plt.close(fig)
+        made.append(("muf_overload.png", "MUF overload experiment: misses of critical and "
+                     "non-critical jobs under RM, EDF, MLF, MUF from 50 % to 150 % load"))
+    sc = exps.get("scaling_tasks")
+    if sc:
+        ns = sc["tasks"]
+        fig, ax = plt.subplots(figsize=(8, 4.5))
+        for op, d in sc["ops"].items():
+            med = d["median"]
+            err = [[max(0.0, a - b) for a, b in zip(med, d["min"])],
+                   [max(0.0, b - a) for a, b in zip(med, d["max"])]]
+            ax.errorbar(ns, med, yerr=err, fmt="o-", capsize=3, label=op, markersize=4)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel("tasks alive (ready, never running)")
+        ax.set_ylabel("ns per operation (median, min–max)")
+        ax.set_title("Scheduler cost against the number of tasks")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(outdir / "scaling_tasks.png", dpi=110)
+        plt.close(fig)
+        made.append(("scaling_tasks.png", "Cost of scheduler operations, yield and spawn "
+                     "against the number of tasks (10 to 10,000)"))
     return made
 
 
@@ -268,12 +361,17 @@ def main():
         md_path = Path(args.markdown)
         md_path.parent.mkdir(parents=True, exist_ok=True)
         plot_dir = Path(args.plots)
-        made = plots(rows, samples, plot_dir)
+        exps = experiments_of(samples)
+        if exps:
+            exp_path = results.with_name("experiments.json")
+            exp_path.write_text(json.dumps(exps, indent=1) + "\n")
+        made = plots(rows, samples, plot_dir, exps)
         invoked = "/usr/bin/python3 bench/run.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
         if os.environ.get("MAKELEVEL"):  # started by the Makefile: say so first
             invoked = f"make bench{' QUICK=1' if args.quick else ''}`, i.e. `{invoked}"
         ran = " ".join(shlex.quote(c) for c in cmd).replace(tmp, "$TMP")
         md = markdown(rows, rest, machine(), (invoked, ran), args.quick, elapsed)
+        md.extend(experiment_markdown(exps))
         if made:
             md.extend(["## Plots", ""])
             rel = os.path.relpath(plot_dir, md_path.parent)
