@@ -2,7 +2,6 @@
 #ifndef CHIMERA_H
 #define CHIMERA_H
 
-#include "chimera/err.h"
 #include "chimera/io.h"
 #include "chimera/irq.h"
 #include "chimera/kernel.h"

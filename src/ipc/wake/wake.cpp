@@ -1,0 +1,116 @@
+// Backplane wake-ups (ipc/wake/wake.hpp).
+#include "ipc/wake/wake.hpp"
+
+#include <cerrno>
+#include <ctime>
+#include <linux/futex.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include "chimera/irq.h"
+#include "ipc/backplane/backplane.hpp"
+#include "kernel/sync/remote_wait.hpp"
+#include "port.hpp"
+
+namespace chm::ipc {
+
+namespace {
+
+std::uint32_t* word_of(bp::A32& a) { return reinterpret_cast<std::uint32_t*>(&a); }
+
+port::Doorbell doorbell_of(bp::RtpuEntry* e) {
+    return port::Doorbell{word_of(e->pending), word_of(e->mailbox), word_of(e->idle), true};
+}
+
+bool g_bound = false;
+
+void grant_vector(int, void*) { kernel::remote_scan_locked(); }
+
+}  // namespace
+
+int wake_bind_kernel() {
+    bp::Attachment* a = bp::current();
+    if (!a || a->kind != bp::SlotKind::Rtpu) return -ENOTCONN;
+    if (!port::on_kernel_thread() || port::kernel_tid() == 0) return -EPERM;
+    if (g_bound) return 0;
+    bp::RtpuEntry* e = a->rtpu(a->slot);
+    const port::Doorbell db = doorbell_of(e);
+    port::irq_disable();
+    port::doorbell_use(&db);
+    port::irq_restore();
+    e->tid.store(std::uint32_t(port::kernel_tid()));
+    if (int r = chm_irq_install(kernel::kGrantVector, grant_vector, nullptr); r != 0 && r != -EBUSY)
+        return r;
+    g_bound = true;
+    return 0;
+}
+
+void wake_unbind_kernel() {
+    if (!g_bound) return;
+    chm_irq_remove(kernel::kGrantVector);
+    port::irq_disable();
+    port::doorbell_use(nullptr);
+    port::irq_restore();
+    if (bp::Attachment* a = bp::current()) a->rtpu(a->slot)->tid.store(0);
+    g_bound = false;
+}
+
+int wake_ring(std::uint32_t slot, int vector) {
+    bp::Attachment* a = bp::current();
+    if (!a) return -ENOTCONN;
+    if (slot >= a->slots() || vector < 0 || vector >= CHM_IRQ_LINE_FIRST) return -EINVAL;
+    bp::RtpuEntry* e = a->rtpu(slot);
+    const int pid = int(e->pid.load());
+    if (pid <= 0) return -ESRCH;
+    port::doorbell_ring(doorbell_of(e), 1u << vector, pid, int(e->tid.load()));
+    return 0;
+}
+
+int wait_word(std::uint32_t* word, std::int64_t timeout_ns) {
+    if (kernel::remote_wait_possible()) return kernel::remote_wait(word, timeout_ns);
+    // A host thread (or the kernel thread outside a task): the futex.
+    timespec deadline{};
+    if (timeout_ns >= 0) {
+        clock_gettime(CLOCK_MONOTONIC, &deadline);
+        const std::int64_t ns = deadline.tv_nsec + timeout_ns % 1000000000;
+        deadline.tv_sec += time_t(timeout_ns / 1000000000 + ns / 1000000000);
+        deadline.tv_nsec = long(ns % 1000000000);
+    }
+    while (__atomic_load_n(word, __ATOMIC_ACQUIRE) == 0) {
+        timespec left{};
+        timespec* limit = nullptr;
+        if (timeout_ns >= 0) {
+            timespec now;
+            clock_gettime(CLOCK_MONOTONIC, &now);
+            std::int64_t d = (deadline.tv_sec - now.tv_sec) * 1000000000LL +
+                             (deadline.tv_nsec - now.tv_nsec);
+            if (d <= 0) return -ETIMEDOUT;
+            left.tv_sec = time_t(d / 1000000000);
+            left.tv_nsec = long(d % 1000000000);
+            limit = &left;
+        }
+        const long r = syscall(SYS_futex, word, FUTEX_WAIT, 0, limit, nullptr, 0);
+        if (r != 0 && errno == EINTR) return -EINTR;
+    }
+    return 0;
+}
+
+bool waits_as_task() { return kernel::remote_wait_possible(); }
+
+void grant_word(std::uint32_t* word, std::uint32_t value, std::uint32_t slot, bool task_waiter) {
+    __atomic_store_n(word, value, __ATOMIC_RELEASE);
+    bp::Attachment* a = bp::current();
+    bp::RtpuEntry* e = a && slot < a->slots() ? a->rtpu(slot) : nullptr;
+    if (task_waiter && e && e->tid.load() != 0) {
+        if (slot == a->slot && port::on_kernel_thread()) {
+            kernel::remote_scan();  // our own RTPU, from one of its tasks
+        } else {
+            port::doorbell_ring(doorbell_of(e), 1u << kernel::kGrantVector, int(e->pid.load()),
+                                int(e->tid.load()));
+        }
+        return;
+    }
+    syscall(SYS_futex, word, FUTEX_WAKE, 1, nullptr, nullptr, 0);  // a thread on the futex
+}
+
+}  // namespace chm::ipc

@@ -1,0 +1,44 @@
+// Waking across the backplane: each RTPU's kernel doorbell lives in its
+// table entry (mailbox = futex sequence, pending = vectors, idle = state),
+// so any process can raise a mailbox interrupt on any RTPU; a waiter on a
+// shared word parks only its task on an RTPU, or sleeps on the word's
+// futex in a host process. Remote semaphores, message queues and express
+// mail wait and wake through here.
+#pragma once
+
+#include <cstdint>
+
+namespace chm::ipc {
+
+// Mailbox vectors with a fixed meaning on every RTPU (chimera/irq.h 0..31;
+// 31 is the kernel's grant vector, kernel/sync/remote_wait.hpp).
+inline constexpr int kVecExpressMail = 30;
+
+// On the kernel thread of a process that joined the backplane as an RTPU,
+// after chm_kernel_init: move the kernel's doorbell into this RTPU's table
+// entry, publish the kernel thread's id (the target of directed signals)
+// and install the grant vector's handler. Idempotent. Errors: -ENOTCONN
+// not joined as an RTPU; -EPERM no kernel on this thread.
+int wake_bind_kernel();
+// Undo wake_bind_kernel (before chm_kernel_fini / chm_bp_leave).
+void wake_unbind_kernel();
+
+// Raise mailbox `vector` on the RTPU in `slot`. Errors: -EINVAL bad slot
+// or vector; -ENOTCONN not attached; -ESRCH the slot runs no process.
+int wake_ring(std::uint32_t slot, int vector);
+
+// Wait until *word != 0: parks only the calling task on an RTPU, sleeps on
+// the word's futex on any other thread. timeout_ns < 0: no limit.
+// Returns 0, -ETIMEDOUT or -EINTR.
+int wait_word(std::uint32_t* word, std::int64_t timeout_ns);
+
+// How the caller of wait_word will wait: parked as a task (woken through
+// its RTPU's doorbell) or on the word's futex (any other thread). A waiter
+// records this beside its word so the granter knows how to wake it.
+bool waits_as_task();
+
+// Store `value` (non-zero) into *word and wake its waiter in `slot`: a task
+// through the slot's doorbell (grant vector), anyone else by the futex.
+void grant_word(std::uint32_t* word, std::uint32_t value, std::uint32_t slot, bool task_waiter);
+
+}  // namespace chm::ipc
