@@ -10,6 +10,7 @@
 #include <csignal>
 #include <cstring>
 #include <sys/mman.h>
+#include <sys/syscall.h>
 #include <unistd.h>
 
 #include "err/err_internal.hpp"
@@ -101,10 +102,10 @@ const char* cpu_detail(const port::FaultInfo& f) {
     b.put(" FAIL-STOP: fault ");
     b.put(where);
     b.put("\n");
-    (void)!write(2, b.s, b.n);
+    (void)!syscall(SYS_write, 2, b.s, b.n);  // libc's write may be interposed (io/)
     LineBuf l;
     err_format_line(l, info, t ? t->name : nullptr);
-    (void)!write(2, l.s, l.n);
+    (void)!syscall(SYS_write, 2, l.s, l.n);
     _exit(CHM_ERR_FAILSTOP_STATUS);
 }
 
