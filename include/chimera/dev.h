@@ -11,8 +11,8 @@
  * Every call returns 0 (or a byte count / new descriptor) or a negative
  * status; none crashes on bad input. Every failing call also records a
  * message naming the problem (device, request, offset), readable with
- * chm_dev_last_error(); that one reporting point is where the global error
- * layer raises its error signal when it is on.
+ * chm_dev_last_error(); with global error handling on, the failure is
+ * raised as an error signal of module "dev" (see chm_dev_err_module).
  *
  * Calling context: any thread. On the kernel thread the driver call runs
  * with the interrupt mask held (a driver operation is never preempted half
@@ -165,6 +165,15 @@ int chm_dev_open_count(void);
 /* The message of the last failing device call on this thread ("" if none):
  * names the call, the device and the problem. */
 const char* chm_dev_last_error(void);
+
+/* Error signals (chimera/err.h). A task with global error handling on
+ * gets every refusal above as an error signal of module "dev" (code: the
+ * errno value, e.g. ENODEV; detail: the chm_dev_last_error() message),
+ * raised when the call returns, holding nothing; a handler that continues
+ * makes the call return its status as when handling is off. Outcomes
+ * (-EAGAIN, -ETIMEDOUT, -EINTR) and CHM_ACT_CLAMPED are never raised.
+ * Returns the module's id (registered on first use) or a negative status. */
+int chm_dev_err_module(void);
 
 /* Short text for a status ("no such device", ...). */
 const char* chm_dev_strerror(int status);

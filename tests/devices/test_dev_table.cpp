@@ -8,6 +8,7 @@
 
 #include "chimera/chimera.h"
 #include "chimera/dev.h"
+#include "chimera/err.h"
 #include "chimera/sensor.h"
 
 namespace {
@@ -245,6 +246,67 @@ TEST_F(DevTable, TaskAbortClosesWhatTheTaskOpened) {
     EXPECT_EQ(chm_dev_read(ctx.dd_a, &c, 1), CHM_EDEV_BADF);
     EXPECT_EQ(chm_dev_read(mine, &c, 1), 1) << "another owner's descriptor was closed";
     EXPECT_EQ(chm_dev_close(mine), 0);
+}
+
+// With global error handling on, a refused device call is an error signal
+// of module "dev" naming the problem; a handler may continue (the call
+// returns its status), and without one the task alone is aborted.
+struct ErrCtx {
+    int calls = 0, code = 0;
+    std::string detail;
+    int64_t open_status = 0, read_status = 0;
+    int quiet_status = 0;
+    bool after_default = false;
+};
+
+TEST_F(DevTable, RefusalsAreErrorSignalsWhenGlobalHandlingIsOn) {
+    chm_kernel_config_t cfg;
+    chm_kernel_config_init(&cfg);
+    cfg.virtual_clock = 1;
+    ASSERT_EQ(chm_kernel_init(&cfg), 0);
+    ASSERT_GT(chm_dev_err_module(), 0);
+    ErrCtx ctx;
+    chm_task_attr_t at;
+    chm_task_attr_init(&at);
+    at.priority = 3;
+    chm_tid_t t;
+    ASSERT_EQ(chm_task_spawn(&t, [](void* p) {
+        auto* c = static_cast<ErrCtx*>(p);
+        c->quiet_status = chm_dev_open("nodev", CHM_DEV_READ);  // global off: just a status
+        chm_err_global(1);
+        chm_err_on_module(chm_dev_err_module(), [](const chm_err_info_t* i, void* a) {
+            auto* c = static_cast<ErrCtx*>(a);
+            c->calls++;
+            c->code = i->code;
+            c->detail = i->detail ? i->detail : "";
+            return CHM_ERR_CONTINUE;
+        }, c);
+        c->open_status = chm_dev_open("arm9", CHM_DEV_READ);
+        const int dd = chm_dev_open("regs0", CHM_DEV_READ);
+        char b;
+        c->read_status = chm_dev_pread(dd, &b, 1, 64);
+        chm_dev_close(dd);
+    }, &ctx, &at), 0);
+    at.priority = 2;
+    ASSERT_EQ(chm_task_spawn(&t, [](void* p) {
+        auto* c = static_cast<ErrCtx*>(p);
+        chm_err_global(1);
+        chm_dev_open("arm9", CHM_DEV_READ);  // no handler: the default aborts this task
+        c->after_default = true;
+    }, &ctx, &at), 0);
+    at.priority = 1;
+    int survivor = 0;
+    ASSERT_EQ(chm_task_spawn(&t, [](void* p) { *static_cast<int*>(p) = 1; }, &survivor, &at), 0);
+    EXPECT_EQ(chm_kernel_run(), 0);
+    chm_kernel_fini();
+    EXPECT_EQ(ctx.quiet_status, CHM_EDEV_NODEV);
+    EXPECT_EQ(ctx.open_status, CHM_EDEV_NODEV);
+    EXPECT_EQ(ctx.read_status, CHM_EDEV_RANGE);
+    EXPECT_EQ(ctx.calls, 2);
+    EXPECT_EQ(ctx.code, ENXIO);
+    EXPECT_NE(ctx.detail.find("regs0: offset 64 is past the end"), std::string::npos) << ctx.detail;
+    EXPECT_FALSE(ctx.after_default) << "the default handler must abort the task";
+    EXPECT_EQ(survivor, 1) << "the RTPU's other tasks keep running";
 }
 
 }  // namespace

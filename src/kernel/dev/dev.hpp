@@ -74,6 +74,18 @@ private:
 // exists, this is where it raises the error signal.
 int fail(int status, const char* call, const char* fmt, ...) __attribute__((format(printf, 3, 4)));
 
+// The exit of every public call: a status that fail() reported becomes an
+// error signal of module "dev" when the calling task has global error
+// handling on (chimera/err.h) and holds no lock; then it is returned.
+// Outcomes (-EAGAIN, -ETIMEDOUT, -EINTR) and positive reports are only
+// returned.
+int64_t leave(int64_t status);
+
+// chm_dev_open / chm_dev_close without the error signal (level 2 uses
+// them and raises once, at its own exit).
+int open_quiet(const char* name, int flags);
+int close_quiet(int dd);
+
 // Level 2 hooks used by level 1 at close and at task abort.
 void actuator_stop_for_close(Slot* s, const chm_dev_ops_t* ops);  // safe stop if an actuator
 void actuator_free(Actuator* a);

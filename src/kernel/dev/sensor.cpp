@@ -110,23 +110,23 @@ using namespace chm::dev;
 
 extern "C" {
 
-int chm_sensor_open(const char* name) {
-    const int dd = chm_dev_open(name, CHM_DEV_READ);
+static int impl_sensor_open(const char* name) {
+    const int dd = open_quiet(name, CHM_DEV_READ);
     if (dd < 0) return dd;
     chm_sio_info_t info;
     const int r = sio_info(dd, CHM_SIO_IOC_SENSOR_INFO, &info, "chm_sensor_open", "a sensor");
     if (r < 0) {
-        chm_dev_close(dd);
+        close_quiet(dd);
         return r;
     }
     return dd;
 }
 
-int chm_sensor_info(int sd, chm_sio_info_t* info) {
+static int impl_sensor_info(int sd, chm_sio_info_t* info) {
     return sio_info(sd, CHM_SIO_IOC_SENSOR_INFO, info, "chm_sensor_info", "a sensor");
 }
 
-int chm_sensor_read(int sd, chm_sensor_sample_t* out) {
+static int impl_sensor_read(int sd, chm_sensor_sample_t* out) {
     const char* call = "chm_sensor_read";
     Use u(sd, call);
     if (!u.ok()) return u.status;
@@ -147,13 +147,13 @@ void chm_actuator_limits_init(chm_actuator_limits_t* lim, const chm_sio_info_t* 
     }
 }
 
-int chm_actuator_info(int ad, chm_sio_info_t* info) {
+static int impl_actuator_info(int ad, chm_sio_info_t* info) {
     return sio_info(ad, CHM_SIO_IOC_ACT_INFO, info, "chm_actuator_info", "an actuator");
 }
 
-int chm_actuator_open(const char* name, const chm_actuator_limits_t* lim) {
+static int impl_actuator_open(const char* name, const chm_actuator_limits_t* lim) {
     const char* call = "chm_actuator_open";
-    const int dd = chm_dev_open(name, CHM_DEV_RDWR);
+    const int dd = open_quiet(name, CHM_DEV_RDWR);
     if (dd < 0) return dd;
     Actuator* a = new (std::nothrow) Actuator;
     int r = a ? 0 : fail(-ENOMEM, call, "%s: no memory", name);
@@ -178,13 +178,13 @@ int chm_actuator_open(const char* name, const chm_actuator_limits_t* lim) {
         r = fail(CHM_EDEV_BADF, call, "%s: descriptor %d closed while opening", name, dd);
     if (r < 0) {
         delete a;
-        chm_dev_close(dd);
+        close_quiet(dd);
         return r;
     }
     return dd;
 }
 
-int chm_actuator_set_limits(int ad, const chm_actuator_limits_t* lim) {
+static int impl_actuator_set_limits(int ad, const chm_actuator_limits_t* lim) {
     Use u(ad, "chm_actuator_set_limits");
     Actuator* a = nullptr;
     if (int r = actuator_of(u, &a); r < 0) return r;
@@ -195,7 +195,7 @@ int chm_actuator_set_limits(int ad, const chm_actuator_limits_t* lim) {
     return 0;
 }
 
-int chm_actuator_write(int ad, const double* v, uint32_t n) {
+static int impl_actuator_write(int ad, const double* v, uint32_t n) {
     const char* call = "chm_actuator_write";
     Use u(ad, call);
     Actuator* a = nullptr;
@@ -246,7 +246,7 @@ int chm_actuator_write(int ad, const double* v, uint32_t n) {
                 v[i], out[i], lim.min[i], lim.max[i], rate_hit ? ", rate" : "");
 }
 
-int chm_actuator_stop(int ad) {
+static int impl_actuator_stop(int ad) {
     const char* call = "chm_actuator_stop";
     Use u(ad, call);
     Actuator* a = nullptr;
@@ -260,7 +260,7 @@ int chm_actuator_stop(int ad) {
     return 0;
 }
 
-int chm_actuator_resume(int ad) {
+static int impl_actuator_resume(int ad) {
     const char* call = "chm_actuator_resume";
     Use u(ad, call);
     Actuator* a = nullptr;
@@ -274,7 +274,7 @@ int chm_actuator_resume(int ad) {
     return 0;
 }
 
-int chm_actuator_stats(int ad, chm_actuator_stats_t* out) {
+static int impl_actuator_stats(int ad, chm_actuator_stats_t* out) {
     const char* call = "chm_actuator_stats";
     Use u(ad, call);
     Actuator* a = nullptr;
@@ -290,8 +290,21 @@ int chm_dev_safe_stop_all(void) {
     const int n = list_open(dds, CHM_DEV_MAX_OPEN, true, CHM_TID_NONE, true);
     int stopped = 0;
     for (int i = 0; i < n; ++i)
-        if (chm_actuator_stop(dds[i]) == 0) ++stopped;
+        if (impl_actuator_stop(dds[i]) == 0) ++stopped;
     return stopped;
 }
+
+
+// The public entry points: one error signal, at the exit (see leave()).
+int chm_sensor_open(const char* name) { return int(leave(impl_sensor_open(name))); }
+int chm_sensor_info(int sd, chm_sio_info_t* info) { return int(leave(impl_sensor_info(sd, info))); }
+int chm_sensor_read(int sd, chm_sensor_sample_t* out) { return int(leave(impl_sensor_read(sd, out))); }
+int chm_actuator_info(int ad, chm_sio_info_t* info) { return int(leave(impl_actuator_info(ad, info))); }
+int chm_actuator_open(const char* name, const chm_actuator_limits_t* lim) { return int(leave(impl_actuator_open(name, lim))); }
+int chm_actuator_set_limits(int ad, const chm_actuator_limits_t* lim) { return int(leave(impl_actuator_set_limits(ad, lim))); }
+int chm_actuator_write(int ad, const double* v, uint32_t n) { return int(leave(impl_actuator_write(ad, v, n))); }
+int chm_actuator_stop(int ad) { return int(leave(impl_actuator_stop(ad))); }
+int chm_actuator_resume(int ad) { return int(leave(impl_actuator_resume(ad))); }
+int chm_actuator_stats(int ad, chm_actuator_stats_t* out) { return int(leave(impl_actuator_stats(ad, out))); }
 
 }  // extern "C"

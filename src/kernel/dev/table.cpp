@@ -178,7 +178,7 @@ using namespace chm::dev;
 
 extern "C" {
 
-int chm_dev_register(const char* name, const chm_dev_ops_t* ops, void* ctx) {
+static int impl_register(const char* name, const chm_dev_ops_t* ops, void* ctx) {
     const char* call = "chm_dev_register";
     if (!name || !*name || !ops || !ops->open || !ops->close)
         return fail(CHM_EDEV_INVAL, call, "NULL or empty name, or ops without open/close");
@@ -199,7 +199,7 @@ int chm_dev_register(const char* name, const chm_dev_ops_t* ops, void* ctx) {
     return fail(-ENOSPC, call, "driver table full (%d devices)", CHM_DEV_MAX_DEVICES);
 }
 
-int chm_dev_unregister(const char* name) {
+static int impl_unregister(const char* name) {
     const char* call = "chm_dev_unregister";
     if (!name) return fail(CHM_EDEV_INVAL, call, "NULL name");
     Crit c;
@@ -212,7 +212,7 @@ int chm_dev_unregister(const char* name) {
     return 0;
 }
 
-int chm_dev_open(const char* name, int flags) {
+static int impl_open(const char* name, int flags) {
     const char* call = "chm_dev_open";
     if (!name) return fail(CHM_EDEV_INVAL, call, "NULL device name");
     if (!(flags & CHM_DEV_RDWR) || (flags & ~(CHM_DEV_RDWR | CHM_DEV_NONBLOCK)))
@@ -263,7 +263,7 @@ int chm_dev_open(const char* name, int flags) {
     return encode(idx, s.gen);
 }
 
-int chm_dev_close(int dd) {
+static int impl_close(int dd) {
     Slot* s = nullptr;
     bool last = false;
     {
@@ -281,20 +281,20 @@ int chm_dev_close(int dd) {
     return 0;
 }
 
-int64_t chm_dev_read(int dd, void* buf, size_t n) {
+static int64_t impl_read(int dd, void* buf, size_t n) {
     return xfer(dd, buf, n, 0, true, false, "chm_dev_read");
 }
-int64_t chm_dev_write(int dd, const void* buf, size_t n) {
+static int64_t impl_write(int dd, const void* buf, size_t n) {
     return xfer(dd, const_cast<void*>(buf), n, 0, true, true, "chm_dev_write");
 }
-int64_t chm_dev_pread(int dd, void* buf, size_t n, uint64_t off) {
+static int64_t impl_pread(int dd, void* buf, size_t n, uint64_t off) {
     return xfer(dd, buf, n, off, false, false, "chm_dev_pread");
 }
-int64_t chm_dev_pwrite(int dd, const void* buf, size_t n, uint64_t off) {
+static int64_t impl_pwrite(int dd, const void* buf, size_t n, uint64_t off) {
     return xfer(dd, const_cast<void*>(buf), n, off, false, true, "chm_dev_pwrite");
 }
 
-int64_t chm_dev_lseek(int dd, int64_t off, int whence) {
+static int64_t impl_lseek(int dd, int64_t off, int whence) {
     const char* call = "chm_dev_lseek";
     Use u(dd, call);
     if (!u.ok()) return u.status;
@@ -316,7 +316,7 @@ int64_t chm_dev_lseek(int dd, int64_t off, int whence) {
     return np;
 }
 
-int chm_dev_ioctl(int dd, unsigned long req, void* arg) {
+static int impl_ioctl(int dd, unsigned long req, void* arg) {
     const char* call = "chm_dev_ioctl";
     Use u(dd, call);
     if (!u.ok()) return u.status;
@@ -327,13 +327,13 @@ int chm_dev_ioctl(int dd, unsigned long req, void* arg) {
     return r;
 }
 
-int chm_dev_event_fd(int dd) {
+static int impl_event_fd(int dd) {
     int fd = -1;
-    const int r = chm_dev_ioctl(dd, CHM_DEV_IOC_EVENT_FD, &fd);
+    const int r = impl_ioctl(dd, CHM_DEV_IOC_EVENT_FD, &fd);
     return r < 0 ? r : fd;
 }
 
-int chm_dev_mmap(int dd, uint64_t off, size_t len, int prot, void** addr) {
+static int impl_mmap(int dd, uint64_t off, size_t len, int prot, void** addr) {
     const char* call = "chm_dev_mmap";
     Use u(dd, call);
     if (!u.ok()) return u.status;
@@ -366,7 +366,7 @@ int chm_dev_mmap(int dd, uint64_t off, size_t len, int prot, void** addr) {
     return 0;
 }
 
-int chm_dev_munmap(int dd, void* addr, size_t len) {
+static int impl_munmap(int dd, void* addr, size_t len) {
     const char* call = "chm_dev_munmap";
     Use u(dd, call);
     if (!u.ok()) return u.status;
@@ -393,7 +393,7 @@ int chm_dev_task_abort(chm_tid_t task) {
     const int n = list_open(dds, CHM_DEV_MAX_OPEN, false, task, false);
     int closed = 0;
     for (int i = 0; i < n; ++i)
-        if (chm_dev_close(dds[i]) == 0) ++closed;  // close safe-stops an actuator
+        if (impl_close(dds[i]) == 0) ++closed;  // close safe-stops an actuator
     return closed;
 }
 
@@ -405,4 +405,26 @@ int chm_dev_open_count(void) {
     return k;
 }
 
+
+// The public entry points: the work above, then the one exit that turns a
+// reported failure into an error signal (report.cpp), with no lock held.
+int chm_dev_register(const char* name, const chm_dev_ops_t* ops, void* ctx) { return int(leave(impl_register(name, ops, ctx))); }
+int chm_dev_unregister(const char* name) { return int(leave(impl_unregister(name))); }
+int chm_dev_open(const char* name, int flags) { return int(leave(impl_open(name, flags))); }
+int chm_dev_close(int dd) { return int(leave(impl_close(dd))); }
+int64_t chm_dev_read(int dd, void* buf, size_t n) { return leave(impl_read(dd, buf, n)); }
+int64_t chm_dev_write(int dd, const void* buf, size_t n) { return leave(impl_write(dd, buf, n)); }
+int64_t chm_dev_pread(int dd, void* buf, size_t n, uint64_t off) { return leave(impl_pread(dd, buf, n, off)); }
+int64_t chm_dev_pwrite(int dd, const void* buf, size_t n, uint64_t off) { return leave(impl_pwrite(dd, buf, n, off)); }
+int64_t chm_dev_lseek(int dd, int64_t off, int whence) { return leave(impl_lseek(dd, off, whence)); }
+int chm_dev_ioctl(int dd, unsigned long req, void* arg) { return int(leave(impl_ioctl(dd, req, arg))); }
+int chm_dev_event_fd(int dd) { return int(leave(impl_event_fd(dd))); }
+int chm_dev_mmap(int dd, uint64_t off, size_t len, int prot, void** addr) { return int(leave(impl_mmap(dd, off, len, prot, addr))); }
+int chm_dev_munmap(int dd, void* addr, size_t len) { return int(leave(impl_munmap(dd, addr, len))); }
+
 }  // extern "C"
+
+namespace chm::dev {
+int open_quiet(const char* name, int flags) { return impl_open(name, flags); }
+int close_quiet(int dd) { return impl_close(dd); }
+}  // namespace chm::dev
