@@ -234,6 +234,14 @@ using RecoverFn = void (*)(const View& v, std::uint32_t entry_index, std::uint32
 // recovers them whether or not it used that subsystem.
 int register_recovery(std::uint32_t kind, RecoverFn fn);
 
+}  // namespace chm::bp
+namespace chm::ipc {
+// Built-in recovery functions of the subsystems (listed in recovery.cpp).
+void rsem_recover(const bp::View& v, std::uint32_t entry_index, std::uint32_t dead_slot,
+                  std::uint32_t dead_gen, std::uint32_t recovery_token);
+}  // namespace chm::ipc
+namespace chm::bp {
+
 // Recover slot `slot` of generation `gen` if its holder is dead and nobody
 // else is recovering it: rob its locks, repair, run the per-kind callbacks,
 // detach it everywhere, mark it DEAD. Returns true when this call did the

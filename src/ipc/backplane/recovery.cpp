@@ -38,6 +38,7 @@ struct Builtin {
 };
 constexpr Builtin kBuiltinRecovery[] = {
     {kKindNone, nullptr},
+    {kKindRemoteSem, chm::ipc::rsem_recover},
 };
 
 RecoverFn recovery_fn(std::uint32_t kind) {

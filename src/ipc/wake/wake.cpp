@@ -99,6 +99,10 @@ bool waits_as_task() { return kernel::remote_wait_possible(); }
 
 void grant_word(std::uint32_t* word, std::uint32_t value, std::uint32_t slot, bool task_waiter) {
     __atomic_store_n(word, value, __ATOMIC_RELEASE);
+    wake_granted(word, slot, task_waiter);
+}
+
+void wake_granted(std::uint32_t* word, std::uint32_t slot, bool task_waiter) {
     bp::Attachment* a = bp::current();
     bp::RtpuEntry* e = a && slot < a->slots() ? a->rtpu(slot) : nullptr;
     if (task_waiter && e && e->tid.load() != 0) {

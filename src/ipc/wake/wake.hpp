@@ -40,5 +40,8 @@ bool waits_as_task();
 // Store `value` (non-zero) into *word and wake its waiter in `slot`: a task
 // through the slot's doorbell (grant vector), anyone else by the futex.
 void grant_word(std::uint32_t* word, std::uint32_t value, std::uint32_t slot, bool task_waiter);
+// Only the wake-up half: for a granter that stored the word under its own
+// lock (so a waiter timing out at that moment sees the grant).
+void wake_granted(std::uint32_t* word, std::uint32_t slot, bool task_waiter);
 
 }  // namespace chm::ipc

@@ -1,0 +1,72 @@
+/* Chimera remote semaphores: binary and counting semaphores in backplane
+ * memory, shared by tasks on every RTPU and by host processes.
+ *
+ * P blocks only the calling task (its RTPU keeps running its other tasks);
+ * on a host thread it sleeps on a futex. V hands the semaphore to the most
+ * urgent waiter (highest task priority, then first come) wherever it is,
+ * through that RTPU's mailbox interrupt: a futex wake when the RTPU idles,
+ * a directed signal when it runs, nothing at all while it polls its
+ * mailbox before sleeping. A waiter whose process dies is removed (by the
+ * backplane's recovery), and a V already handed to it is passed on.
+ *
+ * Every call returns 0 or a negative errno-style status; chm_bp_last_error()
+ * says what was wrong in words. */
+#ifndef CHIMERA_RSEM_H
+#define CHIMERA_RSEM_H
+
+#include <stdint.h>
+
+#include "chimera/sem.h"
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+typedef struct chm_rsem chm_rsem_t; /* a handle: valid in this process */
+
+#define CHM_RSEM_WAITERS 64 /* tasks and threads blocked on one semaphore */
+
+/* Create the semaphore `name` (up to CHM_BP_NAME_MAX chars) of `kind` with
+ * `initial` count (binary: 0 or 1), in common memory (where =
+ * CHM_SHM_COMMON, -1) or in RTPU `where`'s local memory.
+ * Errors: -ENOTCONN not attached to a backplane; -EINVAL NULL name/out,
+ * bad kind, binary initial > 1; -EEXIST name taken; -ENOMEM no room;
+ * -ENOSPC registry full; -ENAMETOOLONG; -ECHRNG bad `where`. */
+int chm_rsem_create(const char* name, enum chm_sem_kind kind, uint32_t initial, int where,
+                    chm_rsem_t** out);
+
+/* Open the semaphore `name` created by any process.
+ * Errors: -ENOTCONN; -EINVAL; -ENOENT no such semaphore. */
+int chm_rsem_open(const char* name, chm_rsem_t** out);
+
+/* P: take the semaphore, waiting as long as needed (chm_rsem_p), at most
+ * `timeout_ns` (chm_rsem_p_timed; 0 = do not wait), or not at all
+ * (chm_rsem_try_p). Errors: -EAGAIN (try_p, or timeout 0) not available;
+ * -ETIMEDOUT; -EINTR a user signal interrupted the wait; -ENOSPC
+ * CHM_RSEM_WAITERS are waiting already; -EINVAL not a semaphore handle;
+ * -ENOTRECOVERABLE damaged by a process that died in it; -EDEADLK its
+ * lock was held past 5 s by a live process. */
+int chm_rsem_p(chm_rsem_t* sem);
+int chm_rsem_p_timed(chm_rsem_t* sem, int64_t timeout_ns);
+int chm_rsem_try_p(chm_rsem_t* sem);
+
+/* V: wake the most urgent waiter, or count up (a binary semaphore stays
+ * at 1). Never blocks. Errors: -EOVERFLOW count at UINT32_MAX; -EINVAL;
+ * -ENOTRECOVERABLE; -EDEADLK. */
+int chm_rsem_v(chm_rsem_t* sem);
+
+/* The count now (>= 0), or -EINVAL. */
+int chm_rsem_value(chm_rsem_t* sem);
+/* Number of tasks and threads waiting now, or -EINVAL. */
+int chm_rsem_waiting(chm_rsem_t* sem);
+
+/* Forget this process's handle (the semaphore lives on). */
+int chm_rsem_close(chm_rsem_t* sem);
+/* Remove the name; the memory goes when no process has it open.
+ * Errors: -ENOTCONN; -EINVAL; -ENOENT. */
+int chm_rsem_destroy(const char* name);
+
+#ifdef __cplusplus
+}
+#endif
+#endif

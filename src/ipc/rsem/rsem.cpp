@@ -1,0 +1,343 @@
+// Remote semaphores (chimera/rsem.h): a count and a table of waiter
+// records in backplane memory under one robust lock. A waiter parks on its
+// record's grant word (ipc/wake); V picks the most urgent record, stores
+// the grant under the lock and wakes it after. Recovery removes a dead
+// slot's records and passes on a grant it never took.
+#include <cerrno>
+#include <climits>
+#include <cstdint>
+
+#include "chimera/rsem.h"
+#include "chimera/shm.h"
+#include "chimera/task.h"
+#include "ipc/backplane/backplane.hpp"
+#include "ipc/wake/wake.hpp"
+
+using namespace chm::bp;
+
+struct chm_rsem;  // the handle is the shared object's address
+
+namespace chm::ipc {
+namespace {
+
+constexpr std::uint32_t kRsemMagic = 0x5253454d;  // "RSEM"
+enum WaiterState : std::uint32_t { kFree = 0, kWaiting = 1, kGranted = 2 };
+
+struct Waiter {
+    A32 state;
+    A32 grant;    // the word its owner waits on
+    A32 slot, gen;
+    A32 prio;     // task priority (higher first); host threads 0
+    A32 seq;      // arrival, FIFO among equals
+    A32 as_task;  // 1: a parked task (doorbell); 0: the futex
+    A32 pad;
+};
+
+struct Rsem {
+    Lock lock;
+    A32 magic;
+    A32 kind;
+    A32 count;
+    A32 nwaiting;
+    A32 seq;
+    A32 broken;
+    Waiter w[CHM_RSEM_WAITERS];
+};
+static_assert(std::is_standard_layout_v<Rsem>);
+
+Rsem* from_handle(chm_rsem_t* h) {
+    Attachment* a = current();
+    if (!a || !h) return nullptr;
+    auto* s = reinterpret_cast<Rsem*>(h);
+    const char* p = reinterpret_cast<const char*>(s);
+    if (p < a->base || p + sizeof(Rsem) > a->base + a->size) return nullptr;
+    return s->magic.load(std::memory_order_relaxed) == kRsemMagic ? s : nullptr;
+}
+
+// Count the waiting records again: the repair after a holder died between
+// marking the lock dirty and clearing it.
+void repair_locked(Rsem* s) {
+    std::uint32_t n = 0;
+    for (Waiter& w : s->w)
+        if (w.state.load() == kWaiting) ++n;
+    s->nwaiting.store(n);
+    if (s->kind.load() == CHM_SEM_BINARY && s->count.load() > 1) s->count.store(1);
+}
+
+int lock(Rsem* s) {
+    Attachment* a = current();
+    int r = lock_acquire(*a, &s->lock, a->token, kInternalPollNs, kInternalTimeoutNs);
+    if (r == -EOWNERDEAD) {
+        repair_locked(s);
+        lock_clear_dirty(&s->lock);
+        r = 0;
+    }
+    if (r == -ETIMEDOUT) {
+        set_error("remote semaphore: its lock was held past 5 s by a live process");
+        return -EDEADLK;
+    }
+    if (r == 0 && s->broken.load()) {
+        lock_release(&s->lock);
+        set_error("remote semaphore: damaged by a process that died in it");
+        return -ENOTRECOVERABLE;
+    }
+    return r;
+}
+
+void unlock(Rsem* s) { lock_release(&s->lock); }
+
+// The most urgent waiting record, or nullptr. Lock held.
+Waiter* most_urgent_locked(Rsem* s) {
+    Waiter* best = nullptr;
+    for (Waiter& w : s->w) {
+        if (w.state.load() != kWaiting) continue;
+        if (!best || w.prio.load() > best->prio.load() ||
+            (w.prio.load() == best->prio.load() && int32_t(w.seq.load() - best->seq.load()) < 0))
+            best = &w;
+    }
+    return best;
+}
+
+// Give one unit: to the most urgent waiter (returned, to be woken after
+// the unlock) or to the count. Lock held.
+int give_locked(Rsem* s, Waiter** woken) {
+    *woken = nullptr;
+    if (Waiter* w = most_urgent_locked(s)) {
+        lock_mark_dirty(&s->lock);
+        w->state.store(kGranted);
+        w->grant.store(1, std::memory_order_release);
+        s->nwaiting.fetch_sub(1);
+        lock_clear_dirty(&s->lock);
+        *woken = w;
+        return 0;
+    }
+    if (s->kind.load() == CHM_SEM_BINARY) {
+        s->count.store(1);
+        return 0;
+    }
+    if (s->count.load() == UINT32_MAX) return -EOVERFLOW;
+    s->count.fetch_add(1);
+    return 0;
+}
+
+int my_priority() {
+    chm_task_status_t st;
+    const chm_tid_t me = chm_task_self();
+    if (me == CHM_TID_NONE || chm_task_status(me, &st) != 0) return 0;
+    return st.priority;
+}
+
+}  // namespace
+
+// Recovery (with the registry lock held by `rt`): drop the dead slot's
+// records; a grant it never took goes to the next waiter or the count.
+// Listed in the backplane's built-in recovery table, so every survivor
+// recovers remote semaphores whether or not it uses them.
+void rsem_recover(const View& v, std::uint32_t index, std::uint32_t dead_slot, std::uint32_t dead_gen,
+             std::uint32_t rt) {
+    auto* s = v.at<Rsem>(v.entry(index)->offset.load());
+    if (s->magic.load() != kRsemMagic) return;
+    if (lock_acquire(v, &s->lock, rt, kInternalPollNs, kInternalTimeoutNs) == -ETIMEDOUT) return;
+    if (s->lock.dirty.load()) repair_locked(s);
+    std::uint32_t passed = 0;
+    for (Waiter& w : s->w) {
+        if (w.slot.load() != dead_slot || w.gen.load() != (dead_gen & 0xFFFFFF)) continue;
+        const std::uint32_t st = w.state.load();
+        if (st == kWaiting) s->nwaiting.fetch_sub(1);
+        if (st == kGranted) ++passed;
+        w.state.store(kFree);
+    }
+    lock_clear_dirty(&s->lock);
+    Waiter* to_wake[CHM_RSEM_WAITERS];
+    std::uint32_t n = 0;
+    for (; passed; --passed) {
+        Waiter* w = nullptr;
+        give_locked(s, &w);
+        if (w) to_wake[n++] = w;
+    }
+    lock_release(&s->lock);
+    for (std::uint32_t i = 0; i < n; ++i)
+        wake_granted(reinterpret_cast<std::uint32_t*>(&to_wake[i]->grant), to_wake[i]->slot.load(),
+                     to_wake[i]->as_task.load() != 0);
+}
+
+}  // namespace chm::ipc
+
+using namespace chm::ipc;
+
+extern "C" {
+
+int chm_rsem_create(const char* name, enum chm_sem_kind kind, uint32_t initial, int where,
+                    chm_rsem_t** out) {
+    if (!name || !out || (kind != CHM_SEM_BINARY && kind != CHM_SEM_COUNTING) ||
+        (kind == CHM_SEM_BINARY && initial > 1)) {
+        set_error("chm_rsem_create: NULL name or out, unknown kind, or a binary count above 1");
+        return -EINVAL;
+    }
+    Attachment* a = current();
+    if (!a) return set_error("chm_rsem_create: not attached to a backplane"), -ENOTCONN;
+    if (where != CHM_SHM_COMMON && (where < 0 || std::uint32_t(where) >= a->slots())) {
+        set_error("chm_rsem_create %s: where %d is neither CHM_SHM_COMMON nor an RTPU", name, where);
+        return -ECHRNG;
+    }
+    int r = registry_lock(*a, a->token);
+    if (r) return set_error("chm_rsem_create %s: registry lock", name), r;
+    EntryInfo info{};
+    r = registry_create_locked(*a, a->token, kKindRemoteSem, name, sizeof(Rsem),
+                               where == CHM_SHM_COMMON ? kWhereCommon : std::uint32_t(where),
+                               a->slot, &info);
+    if (r == 0) {
+        // Not findable by name until the registry lock is released.
+        auto* s = a->at<Rsem>(info.offset);
+        s->kind.store(kind);
+        s->count.store(initial);
+        s->nwaiting.store(0);
+        s->seq.store(0);
+        s->broken.store(0);
+        for (Waiter& w : s->w) w.state.store(kFree);
+        s->lock.token.store(0);
+        s->magic.store(kRsemMagic, std::memory_order_release);
+        a->local_refs[info.index] = 1;
+        *out = reinterpret_cast<chm_rsem_t*>(s);
+    }
+    registry_unlock(*a);
+    switch (r) {
+    case 0: break;
+    case -EEXIST: set_error("chm_rsem_create: the name \"%s\" is taken", name); break;
+    case -ENAMETOOLONG: set_error("chm_rsem_create: name longer than %u", kNameMax); break;
+    case -ENOMEM: set_error("chm_rsem_create %s: no room in that memory", name); break;
+    case -ENOSPC: set_error("chm_rsem_create %s: the registry is full", name); break;
+    default: set_error("chm_rsem_create %s: error %d", name, r); break;
+    }
+    return r;
+}
+
+int chm_rsem_open(const char* name, chm_rsem_t** out) {
+    if (!name || !out) return set_error("chm_rsem_open: NULL name or out"), -EINVAL;
+    Attachment* a = current();
+    if (!a) return set_error("chm_rsem_open: not attached to a backplane"), -ENOTCONN;
+    int r = registry_lock(*a, a->token);
+    if (r) return r;
+    const int i = registry_find_locked(*a, name, kKindRemoteSem);
+    if (i >= 0) {
+        RegistryEntry* e = a->entry(std::uint32_t(i));
+        e->attached.fetch_or(1u << a->slot);
+        ++a->local_refs[i];
+        *out = reinterpret_cast<chm_rsem_t*>(a->base + e->offset.load());
+    }
+    registry_unlock(*a);
+    if (i < 0) return set_error("chm_rsem_open: no remote semaphore \"%s\"", name), -ENOENT;
+    return 0;
+}
+
+int chm_rsem_p_timed(chm_rsem_t* h, int64_t timeout_ns) {
+    Rsem* s = from_handle(h);
+    if (!s) return set_error("chm_rsem_p: not a remote semaphore handle"), -EINVAL;
+    Attachment* a = current();
+    if (int r = lock(s)) return r;
+    if (s->count.load() > 0) {  // the fast path: one lock, no system call
+        s->count.fetch_sub(1);
+        unlock(s);
+        return 0;
+    }
+    if (timeout_ns == 0) {
+        unlock(s);
+        return -EAGAIN;
+    }
+    Waiter* me = nullptr;
+    for (Waiter& w : s->w) {
+        if (w.state.load() == kFree) {
+            me = &w;
+            break;
+        }
+    }
+    if (!me) {
+        unlock(s);
+        set_error("chm_rsem_p: %d tasks wait already", CHM_RSEM_WAITERS);
+        return -ENOSPC;
+    }
+    lock_mark_dirty(&s->lock);
+    me->grant.store(0);
+    me->slot.store(a->slot);
+    me->gen.store(a->gen & 0xFFFFFF);
+    me->prio.store(std::uint32_t(my_priority()));
+    me->seq.store(s->seq.fetch_add(1) + 1);
+    me->as_task.store(waits_as_task() ? 1 : 0);
+    me->state.store(kWaiting);
+    s->nwaiting.fetch_add(1);
+    lock_clear_dirty(&s->lock);
+    unlock(s);
+
+    int r = wait_word(reinterpret_cast<std::uint32_t*>(&me->grant), timeout_ns);
+
+    if (int e = lock(s)) return e;
+    if (me->grant.load() != 0) {
+        r = 0;  // granted, perhaps just as the wait timed out
+    } else if (me->state.load() == kWaiting) {
+        s->nwaiting.fetch_sub(1);
+    }
+    me->state.store(kFree);
+    unlock(s);
+    return r;
+}
+
+int chm_rsem_p(chm_rsem_t* sem) { return chm_rsem_p_timed(sem, -1); }
+int chm_rsem_try_p(chm_rsem_t* sem) { return chm_rsem_p_timed(sem, 0); }
+
+int chm_rsem_v(chm_rsem_t* h) {
+    Rsem* s = from_handle(h);
+    if (!s) return set_error("chm_rsem_v: not a remote semaphore handle"), -EINVAL;
+    if (int r = lock(s)) return r;
+    Waiter* w = nullptr;
+    const int r = give_locked(s, &w);
+    std::uint32_t slot = 0;
+    bool as_task = false;
+    if (w) {
+        slot = w->slot.load();
+        as_task = w->as_task.load() != 0;
+    }
+    unlock(s);
+    if (w) wake_granted(reinterpret_cast<std::uint32_t*>(&w->grant), slot, as_task);
+    if (r) set_error("chm_rsem_v: the count would overflow");
+    return r;
+}
+
+int chm_rsem_value(chm_rsem_t* h) {
+    Rsem* s = from_handle(h);
+    if (!s) return -EINVAL;
+    const std::uint32_t c = s->count.load();
+    return c > INT_MAX ? INT_MAX : int(c);
+}
+
+int chm_rsem_waiting(chm_rsem_t* h) {
+    Rsem* s = from_handle(h);
+    return s ? int(s->nwaiting.load()) : -EINVAL;
+}
+
+int chm_rsem_close(chm_rsem_t* h) {
+    Rsem* s = from_handle(h);
+    if (!s) return set_error("chm_rsem_close: not a remote semaphore handle"), -EINVAL;
+    Attachment* a = current();
+    int r = registry_lock(*a, a->token);
+    if (r) return r;
+    const int i = registry_find_offset_locked(*a, a->off_of(s));
+    if (i >= 0 && a->local_refs[i] && --a->local_refs[i] == 0)
+        registry_detach_locked(*a, std::uint32_t(i), a->slot, a->token);
+    registry_unlock(*a);
+    return 0;
+}
+
+int chm_rsem_destroy(const char* name) {
+    if (!name) return set_error("chm_rsem_destroy: NULL name"), -EINVAL;
+    Attachment* a = current();
+    if (!a) return -ENOTCONN;
+    int r = registry_lock(*a, a->token);
+    if (r) return r;
+    const int i = registry_find_locked(*a, name, kKindRemoteSem);
+    if (i >= 0) registry_destroy_locked(*a, std::uint32_t(i), a->token);
+    registry_unlock(*a);
+    if (i < 0) return set_error("chm_rsem_destroy: no remote semaphore \"%s\"", name), -ENOENT;
+    return 0;
+}
+
+}  // extern "C"
