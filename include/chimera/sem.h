@@ -29,7 +29,10 @@ int chm_sem_destroy(chm_sem_t* sem);
 
 /* P: take one unit, blocking while none is free. Task context.
  * Returns 0, -EINTR (a user signal interrupted the wait), -EIDRM
- * (destroyed while waiting), -EINVAL. */
+ * (destroyed while waiting), -EINVAL. A binary semaphore whose holder was
+ * aborted by an error (chimera/err.h) returns -EOWNERDEAD once, to the
+ * P that takes it next: the unit IS taken (as 0), but what it guarded may
+ * be inconsistent. All P variants do the same. */
 int chm_sem_p(chm_sem_t* sem);
 
 /* P with a relative timeout in ns: also -ETIMEDOUT. */

@@ -284,3 +284,11 @@ int idle_wait_fds_locked(struct pollfd* fds, unsigned long nfds, std::uint64_t u
 void idle_wake();
 
 }  // namespace chm::port
+
+// ------------------------------------------------- processor exceptions
+// (global error handling, err/) SIGSEGV/SIGBUS/SIGFPE/SIGILL of the kernel
+// thread on the alternate signal stack, and redirecting a faulting context
+// into a kernel entry: fault_init, fault_fini, on_fault_thread and, per
+// target in <arch>/fault.cpp, redirect_to_call_from_signal. Documented
+// entry by entry in fault.hpp.
+#include "fault.hpp"
