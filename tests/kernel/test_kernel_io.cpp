@@ -71,11 +71,12 @@ void measured(Body body) {
     g_stop = true;
 }
 
-// The ticker ran throughout the call: several cycles, and no gap longer
-// than a third of the call.
+// The ticker ran throughout the call: several cycles, and no gap as long
+// as the call (a blocked RTPU shows one gap of the whole call; the 3/4
+// bound leaves room for a loaded host descheduling the process a while).
 void expect_rtpu_kept_running() {
     EXPECT_GT(g_out.ticks_during, 3);
-    EXPECT_LT(g_out.max_gap * 3, g_out.waited)
+    EXPECT_LT(g_out.max_gap * 4, g_out.waited * 3)
         << "the ticker stood still for " << g_out.max_gap << " ns of a " << g_out.waited
         << " ns call: the call blocked the RTPU";
 }
@@ -165,6 +166,8 @@ TEST_F(BlockingIo, BigWriteToAFullPipeParksBetweenPieces) {
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
         unsigned char b[4096];
         while (got.size() < kBig) {
+            pollfd p{g_fd[0], POLLIN, 0};
+            if (::poll(&p, 1, 10000) != 1) break;  // bounded: a lost write fails, never hangs
             const ssize_t n = ::read(g_fd[0], b, sizeof b);
             if (n <= 0) break;
             got.insert(got.end(), b, b + n);
