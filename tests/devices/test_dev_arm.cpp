@@ -337,6 +337,35 @@ TEST_F(Arm, AbortingTheOwningTaskStopsItsActuator) {
     EXPECT_EQ(chm_actuator_write(ctx.ad, st.tau, 2), CHM_EDEV_BADF);
 }
 
+// The same through the error layer: a task driving the arm raises an error
+// with no handler; the default handler aborts it, and its actuator goes to
+// its safe stop before anything else runs.
+TEST_F(Arm, ATaskAbortedByAnErrorLeavesItsActuatorStopped) {
+    chm_sim_t* s = make("arm3", manual(2, 0.0));
+    chm_kernel_config_t cfg;
+    chm_kernel_config_init(&cfg);
+    cfg.virtual_clock = 1;
+    ASSERT_EQ(chm_kernel_init(&cfg), 0);
+    static int ad = -1;
+    static bool ran_on = false;
+    chm_tid_t t;
+    ASSERT_EQ(chm_task_spawn(&t, [](void*) {
+        ad = chm_actuator_open("arm3", nullptr);
+        const double tau[2] = {2.0, -2.0};
+        chm_actuator_write(ad, tau, 2);
+        chm_err_invoke(CHM_ERR_KERNEL, CHM_EK_HEAP);  // no handler: aborts this task
+        ran_on = true;
+    }, nullptr, nullptr), 0);
+    chm_kernel_run();
+    chm_kernel_fini();
+    ASSERT_GE(ad, 0);
+    EXPECT_FALSE(ran_on) << "the default handler did not abort the task";
+    const chm_sim_arm_state_t st = state(s);
+    EXPECT_EQ(st.stopped, 1u);
+    EXPECT_EQ(st.tau[0], 0.0);
+    EXPECT_EQ(st.tau[1], 0.0);
+}
+
 // A periodic control task on the kernel's virtual clock drives a 2-joint
 // arm (kernel clock) to a set-point with PID through level 2.
 struct Loop {

@@ -10,6 +10,7 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
+#include "chimera/dev.h"
 #include "chimera/mem.h"
 #include "err/err_internal.hpp"
 #include "port.hpp"
@@ -209,6 +210,9 @@ int err_call_failed(int status, const char* call) {
 }
 
 void err_abort_current() {
+    // Its devices first, in task context: actuators it drives go to their
+    // safe stop and its descriptors close before anything else runs.
+    chm_dev_task_abort(chm_task_self());
     port::irq_disable();
     g_aborting = g_k.current;
     port::irq_restore();
