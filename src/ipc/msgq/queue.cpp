@@ -1,0 +1,410 @@
+// Sending and receiving (chm_msgq_send* / chm_msgq_receive*). The path
+// that need not wait reads like a fast path: a few guards, one robust
+// lock, the copy, a wake-up only if a waiter record says someone waits,
+// unlock. Waiting registers a record in the queue and parks the task (or
+// sleeps on the futex) through ipc/wake; see msgq.hpp for the protocol.
+#include <cerrno>
+#include <cstring>
+#include <ctime>
+
+#include "chimera/bp.h"
+#include "chimera/kernel.h"
+#include "chimera/task.h"
+#include "ipc/msgq/msgq.hpp"
+#include "ipc/wake/wake.hpp"
+
+namespace chm::ipc::msgq {
+
+namespace {
+
+constexpr auto R = std::memory_order_relaxed;
+
+std::uint32_t* word_of(A32& a) { return reinterpret_cast<std::uint32_t*>(&a); }
+
+// a more urgent than b: higher priority, then the earlier ticket.
+bool more_urgent(const Waiter* a, const Waiter* b) {
+    const auto pa = std::int32_t(a->prio.load(R)), pb = std::int32_t(b->prio.load(R));
+    if (pa != pb) return pa > pb;
+    return std::int32_t(a->ticket.load(R) - b->ticket.load(R)) < 0;
+}
+
+A32& waiting_of(QueueHeader* q, std::uint32_t state) {
+    return state == kWaiterRecv ? q->recv_waiting : q->send_waiting;
+}
+
+void free_record_locked(QueueHeader* q, Waiter* w) {
+    const std::uint32_t st = w->state.load(R);
+    if (st == kWaiterFree) return;
+    w->state.store(kWaiterFree, R);
+    waiting_of(q, st).fetch_sub(1, R);
+}
+
+bool has_room(const QueueHeader* q, std::uint32_t len) {
+    return q->free_head.load(R) != kNil && q->bytes.load(R) + len <= q->max_bytes;
+}
+
+void put_locked(QueueHeader* q, std::uint32_t sender, std::uint32_t type, std::uint32_t prio,
+                const void* data, std::uint32_t len) {
+    const std::uint32_t i = q->free_head.load(R);
+    MsgSlot* s = slot_at(q, i);
+    q->free_head.store(s->next.load(R), R);
+    s->type.store(type, R);
+    s->len.store(len, R);
+    s->prio.store(prio, R);
+    s->seq.store(q->next_seq.fetch_add(1, R), R);
+    s->sender.store(sender, R);
+    if (len) std::memcpy(payload_of(s), data, len);
+    s->state.store(kSlotQueued, std::memory_order_release);  // committed
+    const std::uint32_t l = level_of(q, prio);
+    if (q->order == kLifo) {
+        s->next.store(q->head[l].load(R), R);
+        if (q->head[l].load(R) == kNil) q->tail[l].store(i, R);
+        q->head[l].store(i, R);
+    } else {
+        s->next.store(kNil, R);
+        const std::uint32_t t = q->tail[l].load(R);
+        if (t == kNil) q->head[l].store(i, R);
+        else slot_at(q, t)->next.store(i, R);
+        q->tail[l].store(i, R);
+    }
+    q->level_mask.fetch_or(1u << l, R);
+    q->count.fetch_add(1, R);
+    q->bytes.fetch_add(len, R);
+    q->sent.fetch_add(1, R);
+}
+
+// The next message's slot index (the queue is not empty).
+std::uint32_t next_index(const QueueHeader* q, std::uint32_t* level) {
+    const std::uint32_t mask = q->level_mask.load(R);
+    const std::uint32_t l = q->order == kPriority ? 31u - std::uint32_t(__builtin_clz(mask)) : 0u;
+    *level = l;
+    return q->head[l].load(R);
+}
+
+void fill_info(MsgSlot* s, chm_msgq_msg_info_t* info) {
+    if (!info) return;
+    info->type = s->type.load(R);
+    info->prio = s->prio.load(R);
+    info->len = s->len.load(R);
+    info->sender = std::int32_t(s->sender.load(R));
+}
+
+// Take the next message into buf: its length, or -EMSGSIZE (left queued).
+int get_locked(QueueHeader* q, void* buf, std::size_t size, chm_msgq_msg_info_t* info) {
+    std::uint32_t l;
+    const std::uint32_t i = next_index(q, &l);
+    MsgSlot* s = slot_at(q, i);
+    const std::uint32_t len = s->len.load(R);
+    fill_info(s, info);
+    if (len > size) return -EMSGSIZE;
+    const std::uint32_t next = s->next.load(R);
+    q->head[l].store(next, R);
+    if (next == kNil) {
+        q->tail[l].store(kNil, R);
+        q->level_mask.fetch_and(~(1u << l), R);
+    }
+    if (len) std::memcpy(buf, payload_of(s), len);
+    s->state.store(kSlotFree, std::memory_order_release);  // released
+    s->next.store(q->free_head.load(R), R);
+    q->free_head.store(i, R);
+    q->count.fetch_sub(1, R);
+    q->bytes.fetch_sub(len, R);
+    q->received.fetch_add(1, R);
+    return int(len);
+}
+
+std::uint64_t now_ns(bool task) {
+    if (task) return chm_time_now();
+    timespec ts{};
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return std::uint64_t(ts.tv_sec) * 1000000000ull + std::uint64_t(ts.tv_nsec);
+}
+
+std::int32_t my_priority(bool task) {
+    if (!task) return 0;
+    chm_task_status_t st;
+    return chm_task_status(chm_task_self(), &st) == 0 ? st.priority : 0;
+}
+
+// A free record for the caller, or nullptr (all taken: the caller polls).
+Waiter* register_locked(QueueHeader* q, std::uint32_t state, std::uint32_t me, bool task,
+                        std::int32_t prio) {
+    for (std::uint32_t i = 0; i < q->max_waiters; ++i) {
+        Waiter* w = waiter_at(q, i);
+        if (w->state.load(R) != kWaiterFree) continue;
+        std::uint32_t t = q->next_ticket.fetch_add(1, R);
+        if (t == 0) t = q->next_ticket.fetch_add(1, R);
+        w->word.store(0, R);
+        w->ticket.store(t, R);
+        w->token.store(me, R);
+        w->task.store(task ? 1 : 0, R);
+        w->prio.store(std::uint32_t(prio), R);
+        w->state.store(state, std::memory_order_release);
+        waiting_of(q, state).fetch_add(1, R);
+        return w;
+    }
+    return nullptr;
+}
+
+QueueHeader* handle_queue(const bp::Attachment* a, chm_msgq_t* h) {
+    const char* p = reinterpret_cast<const char*>(h);
+    if (!p || p < a->base || std::uint32_t(p - a->base) > a->size - sizeof(QueueHeader) ||
+        (std::uint32_t(p - a->base) & 15) != 0)
+        return nullptr;
+    auto* q = reinterpret_cast<QueueHeader*>(const_cast<char*>(p));
+    return q->magic.load(std::memory_order_acquire) == kMagic ? q : nullptr;
+}
+
+int bad_handle(const char* fn, chm_msgq_t* h) {
+    bp::set_error("%s: %p is not an open message queue", fn, static_cast<void*>(h));
+    return -EINVAL;
+}
+
+// The two directions of the queue, so send and receive share one wait
+// loop (a template: the hot path is inlined, no indirect calls).
+struct SendOp {
+    static constexpr std::uint32_t kMine = kWaiterSend, kOther = kWaiterRecv;
+    std::uint32_t sender, type, prio, len;
+    const void* data;
+    bool ready(const QueueHeader* q) const { return has_room(q, len); }
+    int act(QueueHeader* q) const {
+        put_locked(q, sender, type, prio, data, len);
+        return 0;
+    }
+};
+
+struct RecvOp {
+    static constexpr std::uint32_t kMine = kWaiterRecv, kOther = kWaiterSend;
+    void* buf;
+    std::size_t size;
+    chm_msgq_msg_info_t* info;
+    bool ready(const QueueHeader* q) const { return q->count.load(R) != 0; }
+    int act(QueueHeader* q) const { return get_locked(q, buf, size, info); }
+};
+
+// The whole operation, lock to unlock.
+template <class Op>
+int run(const bp::Attachment* a, QueueHeader* q, const Op& op, std::int64_t timeout_ns) {
+    int r = lock_queue(*a, q, a->token);
+    if (r) return r;
+    WakeBuf<2> wakes;
+    // The path that needs no wait.
+    if (!q->destroyed.load(R) && op.ready(q)) {
+        bp::lock_mark_dirty(&q->lock);
+        r = op.act(q);
+        if (r >= 0 && waiting_of(q, Op::kOther).load(R)) grant_one_locked(*a, q, Op::kOther, &wakes);
+        bp::lock_clear_dirty(&q->lock);
+        unlock_queue(q);
+        wakes.deliver();
+        return r;
+    }
+    // Waiting.
+    const bool task = waits_as_task();
+    const std::int32_t prio = my_priority(task);
+    const std::uint64_t start = timeout_ns > 0 ? now_ns(task) : 0;
+    bool timed_out = false;
+    for (;;) {
+        if (q->destroyed.load(R)) {
+            r = -EIDRM;
+            break;
+        }
+        if (op.ready(q)) {
+            bp::lock_mark_dirty(&q->lock);
+            r = op.act(q);
+            if (r >= 0 && waiting_of(q, Op::kOther).load(R)) grant_one_locked(*a, q, Op::kOther, &wakes);
+            bp::lock_clear_dirty(&q->lock);
+            break;
+        }
+        if (timeout_ns == 0) {
+            r = -EAGAIN;
+            break;
+        }
+        std::int64_t left = -1;
+        if (timeout_ns > 0) {
+            const std::uint64_t spent = now_ns(task) - start;
+            if (timed_out || spent >= std::uint64_t(timeout_ns)) {
+                r = -ETIMEDOUT;
+                break;
+            }
+            left = timeout_ns - std::int64_t(spent);
+        }
+        bp::lock_mark_dirty(&q->lock);
+        Waiter* w = register_locked(q, Op::kMine, a->token, task, prio);
+        const std::uint32_t ticket = w ? w->ticket.load(R) : 0;
+        bp::lock_clear_dirty(&q->lock);
+        unlock_queue(q);
+        int wr;
+        if (w) {
+            wr = wait_word(word_of(w->word), left);
+        } else {  // every record taken: poll
+            const std::int64_t nap = left >= 0 && left < 1000000 ? left : 1000000;
+            bp::relinquish(std::uint64_t(nap));
+            wr = 0;
+        }
+        if ((r = lock_queue(*a, q, a->token)) != 0) return r;
+        if (w && w->ticket.load(R) == ticket && w->token.load(R) == a->token) {
+            bp::lock_mark_dirty(&q->lock);
+            free_record_locked(q, w);
+            bp::lock_clear_dirty(&q->lock);
+        }
+        if (wr == -ETIMEDOUT) timed_out = true;
+        if (wr == -EINTR) {
+            r = -EINTR;
+            break;
+        }
+    }
+    // Leaving without acting while the condition holds: a grant this
+    // caller may have taken passes to the next waiter of its direction.
+    if (r < 0 && r != -EIDRM && op.ready(q) && waiting_of(q, Op::kMine).load(R)) {
+        bp::lock_mark_dirty(&q->lock);
+        grant_one_locked(*a, q, Op::kMine, &wakes);
+        bp::lock_clear_dirty(&q->lock);
+    }
+    unlock_queue(q);
+    wakes.deliver();
+    return r;
+}
+
+int send_common(const char* fn, chm_msgq_t* h, std::uint32_t type, std::uint32_t prio, const void* data,
+                std::size_t len, std::int64_t timeout_ns) {
+    bp::Attachment* a = bp::current();
+    if (!a) return bp::set_error("%s: not attached to a backplane", fn), -ENOTCONN;
+    QueueHeader* q = handle_queue(a, h);
+    if (!q) return bad_handle(fn, h);
+    if (prio > CHM_MSGQ_PRIO_MAX || (!data && len))
+        return bp::set_error("%s: priority %u above %d, or NULL data", fn, prio, CHM_MSGQ_PRIO_MAX), -EINVAL;
+    if (len > q->max_msg || len > q->max_bytes)
+        return bp::set_error("%s: %zu bytes, the queue takes at most %u", fn, len,
+                             q->max_msg < q->max_bytes ? q->max_msg : q->max_bytes), -EMSGSIZE;
+    const SendOp op{a->slot, type, prio, std::uint32_t(len), data};
+    return run(a, q, op, timeout_ns);
+}
+
+int recv_common(const char* fn, chm_msgq_t* h, void* buf, std::size_t size, chm_msgq_msg_info_t* info,
+                std::int64_t timeout_ns) {
+    bp::Attachment* a = bp::current();
+    if (!a) return bp::set_error("%s: not attached to a backplane", fn), -ENOTCONN;
+    QueueHeader* q = handle_queue(a, h);
+    if (!q) return bad_handle(fn, h);
+    if (!buf && size) return bp::set_error("%s: NULL buffer", fn), -EINVAL;
+    const RecvOp op{buf, size, info};
+    return run(a, q, op, timeout_ns);
+}
+
+}  // namespace
+
+// ------------------------------------------------------------- internals
+
+void Wakes::add(const Wake& x) {
+    if (n < cap) {
+        w[n++] = x;
+        return;
+    }
+    wake_granted(x.word, x.slot, x.task);  // no room to defer: wake now
+}
+
+void Wakes::deliver() {
+    for (std::uint32_t i = 0; i < n; ++i) wake_granted(w[i].word, w[i].slot, w[i].task);
+    n = 0;
+}
+
+int lock_queue(const bp::View& v, QueueHeader* q, std::uint32_t me) {
+    const int r = bp::lock_acquire(v, &q->lock, me, kLockPollNs, bp::kInternalTimeoutNs);
+    if (r == -ETIMEDOUT) {
+        bp::set_error("message queue: its lock was held past %llu ms by a live peer",
+                      static_cast<unsigned long long>(bp::kInternalTimeoutNs / 1000000));
+        return -EDEADLK;
+    }
+    if (r == -EOWNERDEAD) {
+        // The holder died: rebuild what it may have left half-changed.
+        if (q->lock.dirty.load(std::memory_order_acquire) && !q->broken.load(R)) rebuild_locked(q);
+        bp::lock_clear_dirty(&q->lock);
+    }
+    if (q->broken.load(R)) {
+        bp::lock_release(&q->lock);
+        bp::set_error("message queue: damaged by a process that died in it");
+        return -ENOTRECOVERABLE;
+    }
+    return 0;
+}
+
+void unlock_queue(QueueHeader* q) { bp::lock_release(&q->lock); }
+
+bool grant_one_locked(const bp::View& v, QueueHeader* q, std::uint32_t state, Wakes* out) {
+    Waiter* best = nullptr;
+    for (std::uint32_t i = 0; i < q->max_waiters; ++i) {
+        Waiter* w = waiter_at(q, i);
+        if (w->state.load(R) != state || w->word.load(R) == w->ticket.load(R)) continue;
+        if (!bp::token_alive(v, w->token.load(R), false)) {
+            free_record_locked(q, w);  // its process died; recovery has not run yet
+            continue;
+        }
+        if (!best || more_urgent(w, best)) best = w;
+    }
+    if (!best) return false;
+    const std::uint32_t t = best->ticket.load(R);
+    best->word.store(t, std::memory_order_release);
+    out->add(Wake{word_of(best->word), t, bp::token_slot(best->token.load(R)), best->task.load(R) != 0});
+    return true;
+}
+
+void grant_all_locked(QueueHeader* q, Wakes* out) {
+    for (std::uint32_t i = 0; i < q->max_waiters; ++i) {
+        Waiter* w = waiter_at(q, i);
+        if (w->state.load(R) == kWaiterFree) continue;
+        const std::uint32_t t = w->ticket.load(R);
+        w->word.store(t, std::memory_order_release);
+        out->add(Wake{word_of(w->word), t, bp::token_slot(w->token.load(R)), w->task.load(R) != 0});
+    }
+}
+
+void purge_token_locked(const bp::View& v, QueueHeader* q, std::uint32_t token, Wakes* out) {
+    std::uint32_t passed[2] = {0, 0};  // grants the dead held: receivers, senders
+    for (std::uint32_t i = 0; i < q->max_waiters; ++i) {
+        Waiter* w = waiter_at(q, i);
+        const std::uint32_t st = w->state.load(R);
+        if (st == kWaiterFree || w->token.load(R) != token) continue;
+        if (w->word.load(R) == w->ticket.load(R)) ++passed[st == kWaiterRecv ? 0 : 1];
+        free_record_locked(q, w);
+    }
+    // Each grant a dead waiter took and never used goes to a live one, as
+    // long as there is something to take (messages) or room to send into.
+    for (std::uint32_t k = 0; k < passed[0] && q->count.load(R) != 0; ++k)
+        if (!grant_one_locked(v, q, kWaiterRecv, out)) break;
+    for (std::uint32_t k = 0; k < passed[1] && q->free_head.load(R) != kNil; ++k)
+        if (!grant_one_locked(v, q, kWaiterSend, out)) break;
+}
+
+}  // namespace chm::ipc::msgq
+
+using namespace chm::ipc::msgq;
+
+extern "C" {
+
+int chm_msgq_send(chm_msgq_t* q, std::uint32_t type, std::uint32_t prio, const void* data, size_t len) {
+    return send_common("chm_msgq_send", q, type, prio, data, len, -1);
+}
+
+int chm_msgq_send_timed(chm_msgq_t* q, std::uint32_t type, std::uint32_t prio, const void* data, size_t len,
+                        std::int64_t timeout_ns) {
+    return send_common("chm_msgq_send_timed", q, type, prio, data, len, timeout_ns < 0 ? -1 : timeout_ns);
+}
+
+int chm_msgq_try_send(chm_msgq_t* q, std::uint32_t type, std::uint32_t prio, const void* data, size_t len) {
+    return send_common("chm_msgq_try_send", q, type, prio, data, len, 0);
+}
+
+int chm_msgq_receive(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info) {
+    return recv_common("chm_msgq_receive", q, buf, size, info, -1);
+}
+
+int chm_msgq_receive_timed(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info,
+                           std::int64_t timeout_ns) {
+    return recv_common("chm_msgq_receive_timed", q, buf, size, info, timeout_ns < 0 ? -1 : timeout_ns);
+}
+
+int chm_msgq_try_receive(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info) {
+    return recv_common("chm_msgq_try_receive", q, buf, size, info, 0);
+}
+
+}  // extern "C"
