@@ -103,6 +103,20 @@ static_assert(offsetof(QueueHeader, head) == 128);
 static_assert(bp::kShared<MsgSlot> && sizeof(MsgSlot) == 32);
 static_assert(bp::kShared<Waiter> && sizeof(Waiter) == 32);
 
+// Read-modify-write of a word only the lock holder changes: a load and a
+// store (a relaxed fetch_add would still be a locked bus cycle).
+inline std::uint32_t bump(A32& a, std::uint32_t delta) {
+    const std::uint32_t old = a.load(std::memory_order_relaxed);
+    a.store(old + delta, std::memory_order_relaxed);
+    return old;
+}
+inline void set_bits(A32& a, std::uint32_t bits) {
+    a.store(a.load(std::memory_order_relaxed) | bits, std::memory_order_relaxed);
+}
+inline void clear_bits(A32& a, std::uint32_t bits) {
+    a.store(a.load(std::memory_order_relaxed) & ~bits, std::memory_order_relaxed);
+}
+
 inline MsgSlot* slot_at(QueueHeader* q, std::uint32_t i) {
     return reinterpret_cast<MsgSlot*>(reinterpret_cast<char*>(q) + q->slots_off + i * q->slot_size);
 }

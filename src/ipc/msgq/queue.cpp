@@ -36,7 +36,7 @@ void free_record_locked(QueueHeader* q, Waiter* w) {
     const std::uint32_t st = w->state.load(R);
     if (st == kWaiterFree) return;
     w->state.store(kWaiterFree, R);
-    waiting_of(q, st).fetch_sub(1, R);
+    bump(waiting_of(q, st), std::uint32_t(-1));
 }
 
 bool has_room(const QueueHeader* q, std::uint32_t len) {
@@ -51,7 +51,7 @@ void put_locked(QueueHeader* q, std::uint32_t sender, std::uint32_t type, std::u
     s->type.store(type, R);
     s->len.store(len, R);
     s->prio.store(prio, R);
-    s->seq.store(q->next_seq.fetch_add(1, R), R);
+    s->seq.store(bump(q->next_seq, 1), R);
     s->sender.store(sender, R);
     if (len) std::memcpy(payload_of(s), data, len);
     s->state.store(kSlotQueued, std::memory_order_release);  // committed
@@ -67,10 +67,10 @@ void put_locked(QueueHeader* q, std::uint32_t sender, std::uint32_t type, std::u
         else slot_at(q, t)->next.store(i, R);
         q->tail[l].store(i, R);
     }
-    q->level_mask.fetch_or(1u << l, R);
-    q->count.fetch_add(1, R);
-    q->bytes.fetch_add(len, R);
-    q->sent.fetch_add(1, R);
+    set_bits(q->level_mask, 1u << l);
+    bump(q->count, 1);
+    bump(q->bytes, len);
+    bump(q->sent, 1);
 }
 
 // The next message's slot index (the queue is not empty).
@@ -101,15 +101,15 @@ int get_locked(QueueHeader* q, void* buf, std::size_t size, chm_msgq_msg_info_t*
     q->head[l].store(next, R);
     if (next == kNil) {
         q->tail[l].store(kNil, R);
-        q->level_mask.fetch_and(~(1u << l), R);
+        clear_bits(q->level_mask, 1u << l);
     }
     if (len) std::memcpy(buf, payload_of(s), len);
     s->state.store(kSlotFree, std::memory_order_release);  // released
     s->next.store(q->free_head.load(R), R);
     q->free_head.store(i, R);
-    q->count.fetch_sub(1, R);
-    q->bytes.fetch_sub(len, R);
-    q->received.fetch_add(1, R);
+    bump(q->count, std::uint32_t(-1));
+    bump(q->bytes, 0u - len);
+    bump(q->received, 1);
     return int(len);
 }
 
@@ -132,15 +132,15 @@ Waiter* register_locked(QueueHeader* q, std::uint32_t state, std::uint32_t me, b
     for (std::uint32_t i = 0; i < q->max_waiters; ++i) {
         Waiter* w = waiter_at(q, i);
         if (w->state.load(R) != kWaiterFree) continue;
-        std::uint32_t t = q->next_ticket.fetch_add(1, R);
-        if (t == 0) t = q->next_ticket.fetch_add(1, R);
+        std::uint32_t t = bump(q->next_ticket, 1);
+        if (t == 0) t = bump(q->next_ticket, 1);
         w->word.store(0, R);
         w->ticket.store(t, R);
         w->token.store(me, R);
         w->task.store(task ? 1 : 0, R);
         w->prio.store(std::uint32_t(prio), R);
         w->state.store(state, std::memory_order_release);
-        waiting_of(q, state).fetch_add(1, R);
+        bump(waiting_of(q, state), 1);
         return w;
     }
     return nullptr;
