@@ -6,6 +6,7 @@
 #include "chimera/io.h"
 #include "chimera/irq.h"
 #include "chimera/kernel.h"
+#include "chimera/msgq.h"
 #include "chimera/program.h"
 #include "chimera/rsem.h"
 #include "chimera/sched.h"

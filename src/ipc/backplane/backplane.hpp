@@ -239,6 +239,10 @@ namespace chm::ipc {
 // Built-in recovery functions of the subsystems (listed in recovery.cpp).
 void rsem_recover(const bp::View& v, std::uint32_t entry_index, std::uint32_t dead_slot,
                   std::uint32_t dead_gen, std::uint32_t recovery_token);
+namespace msgq {
+void recover(const bp::View& v, std::uint32_t entry_index, std::uint32_t dead_slot,
+             std::uint32_t dead_gen, std::uint32_t recovery_token);
+}
 }  // namespace chm::ipc
 namespace chm::bp {
 

@@ -39,6 +39,7 @@ struct Builtin {
 constexpr Builtin kBuiltinRecovery[] = {
     {kKindNone, nullptr},
     {kKindRemoteSem, chm::ipc::rsem_recover},
+    {kKindMsgQueue, chm::ipc::msgq::recover},
 };
 
 RecoverFn recovery_fn(std::uint32_t kind) {
