@@ -22,14 +22,24 @@ protected:
         }
         int fds[2];
         if (pipe(fds) != 0) return "";
-        args.insert(args.begin(), {tool, "--dir", dir_});
+        // CHIMERA_SIM_TOOL may be an emulator command line (cross builds):
+        // split it on spaces into argv words.
+        std::vector<std::string> cmd;
+        for (std::string t = tool; !t.empty();) {
+            const size_t sp = t.find(' ');
+            if (sp) cmd.push_back(t.substr(0, sp));
+            t = sp == std::string::npos ? "" : t.substr(sp + 1);
+        }
+        cmd.push_back("--dir");
+        cmd.push_back(dir_);
+        args.insert(args.begin(), cmd.begin(), cmd.end());
         const pid_t p = spawn_child([&] {
             dup2(fds[1], 1);
             close(fds[0]);
             std::vector<char*> argv;
             for (std::string& a : args) argv.push_back(a.data());
             argv.push_back(nullptr);
-            execv(tool, argv.data());
+            execv(argv[0], argv.data());
             return 127;
         });
         close(fds[1]);
