@@ -3,6 +3,10 @@
 // from a probe another process moves or from the simulated arm's tip.
 #include <cmath>
 
+#include <poll.h>
+#include <unistd.h>
+
+#include "chimera/chimera.h"
 #include "dev_fixture.hpp"
 
 namespace {
@@ -150,3 +154,58 @@ TEST_F(Ft, OnTheArmReadsTheContactThatHoldsItUp) {
 }
 
 }  // namespace
+
+// Interrupts from a simulated device wake a task: the sensor's event
+// descriptor is bound to IRQ line 40; another process presses the probe;
+// the handler drains the line and Vs the semaphore a task waits on, and the
+// task reads the contact force.
+chm_sem_t g_contact;
+int g_ev = -1, g_sd = -1;
+double g_fz = -1;
+int g_p_result = 1;
+
+TEST_F(Ft, ContactInterruptWakesATask) {
+    chm_sim_ft_config_t c;
+    chm_sim_ft_config_init(&c);
+    c.contact_k = 1000.0;
+    ASSERT_EQ(chm_sim_ft_create(path("ft0").c_str(), &c), 0);
+    reg("ft0", "ft0");
+    const std::string file = path("ft0");
+    const pid_t child = spawn_child([&] {  // forked before the kernel starts
+        usleep(100000);
+        chm_sim_t* s = nullptr;
+        if (chm_sim_attach(file.c_str(), &s) < 0) return 1;
+        const double p[3] = {0.0, 0.0, -0.004};
+        const int r = chm_sim_ft_set_probe(s, p, nullptr);
+        chm_sim_detach(s);
+        return r == 0 ? 0 : 2;
+    });
+    chm_kernel_config_t cfg;
+    chm_kernel_config_init(&cfg);
+    ASSERT_EQ(chm_kernel_init(&cfg), 0);
+    g_sd = chm_sensor_open("ft0");
+    ASSERT_GE(g_sd, 0);
+    g_ev = chm_dev_event_fd(g_sd);
+    ASSERT_GE(g_ev, 0);
+    chm::test::drain(g_ev);
+    ASSERT_EQ(chm_sem_init(&g_contact, CHM_SEM_COUNTING, 0, 0), 0);
+    ASSERT_EQ(chm_irq_install(40, [](int, void*) {
+        chm::test::drain(g_ev);  // level-triggered: consume what raised the line
+        chm_sem_v(&g_contact);
+    }, nullptr), 0);
+    ASSERT_EQ(chm_irq_attach_fd(40, g_ev, POLLIN), 0);
+    chm_tid_t t;
+    ASSERT_EQ(chm_task_spawn(&t, [](void*) {
+        g_p_result = chm_sem_p_timed(&g_contact, 10000000000ull);
+        chm_sensor_sample_t smp;
+        if (g_p_result == 0 && chm_sensor_read(g_sd, &smp) == 0) g_fz = smp.v[2];
+    }, nullptr, nullptr), 0);
+    EXPECT_EQ(chm_kernel_run(), 0);
+    chm_irq_detach_fd(40);
+    chm_irq_remove(40);
+    chm_dev_close(g_sd);
+    chm_kernel_fini();
+    ASSERT_EQ(wait_child(child), 0);
+    EXPECT_EQ(g_p_result, 0) << "no interrupt woke the task";
+    EXPECT_NEAR(g_fz, 4.0, 1e-9);
+}
