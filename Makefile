@@ -32,8 +32,10 @@ $(BUILD)/build.ninja:
 build: deps $(BUILD)/build.ninja
 	meson compile -C $(BUILD)
 
+# A live three-RTPU system on the default /dev/shm backplane, ~15 s; stops
+# and removes everything at the end or on Ctrl-C (examples/multi/demo.sh).
 demo: build
-	$(BUILD)/examples/chimera-demo
+	@sh examples/multi/demo.sh $(BUILD)
 
 test: test-native test-m68k test-aarch64
 

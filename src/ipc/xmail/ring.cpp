@@ -1,0 +1,223 @@
+// Express mail, the sender's side (xmail.hpp): claim a record of the
+// target's ring, write and post the request, ring the target, wait for the
+// reply in bounded slices while watching that the target lives, and give
+// the record back. Also the reclaim of records whose owner died.
+#include <cerrno>
+#include <cstdarg>
+#include <cstdio>
+#include <cstring>
+
+#include "chimera/irq.h"
+#include "ipc/wake/wake.hpp"
+#include "ipc/xmail/xmail.hpp"
+#include "kernel.hpp"
+#include "port.hpp"
+
+namespace chm::xmail {
+
+namespace {
+
+constexpr auto R = std::memory_order_relaxed;
+constexpr auto Acq = std::memory_order_acquire;
+constexpr auto Rel = std::memory_order_release;
+
+// A waiting sender looks at its target this often: a death is seen within
+// one slice even when the reply's wake-up cannot reach the sender.
+constexpr std::int64_t kSliceNs = 20'000'000;
+
+thread_local char t_error[256];
+
+std::uint64_t now_ns() { return port::now_ns(); }
+
+const char* state_name(bp::SlotState s) {
+    switch (s) {
+    case bp::SlotState::Free: return "free";
+    case bp::SlotState::Joining: return "joining";
+    case bp::SlotState::Running: return "running";
+    case bp::SlotState::Leaving: return "leaving";
+    case bp::SlotState::Dead: return "dead";
+    case bp::SlotState::Recovering: return "being recovered";
+    }
+    return "in an unknown state";
+}
+
+// Under the ring lock: a FREE record, claimed for `token` (state WRITING,
+// owner and stamp set before the state leaves FREE). nullptr: ring full.
+Record* claim_locked(bp::RingHeader* ring, std::uint32_t token, std::uint32_t* seq_out) {
+    const std::uint32_t cap = ring->capacity;
+    const std::uint32_t start = ring->head.load(R) % cap;
+    for (std::uint32_t k = 0; k < cap; ++k) {
+        Record* r = record_at(ring, (start + k) % cap);
+        if (phase_of(r->state.load(Acq)) != kFree) continue;
+        std::uint32_t seq = (ring->head.fetch_add(1, R) + 1) & 0x0FFFFFFF;
+        if (seq == 0) seq = 1;
+        r->owner.store(token, R);
+        r->stamp_ms.store(bp::mono_ms(), R);
+        r->state.store(make_state(seq, kWriting), Rel);
+        *seq_out = seq;
+        return r;
+    }
+    return nullptr;
+}
+
+// The sender gives its record up (timeout, dead target). Returns true when
+// the reply came in after all (the caller then takes it).
+bool abandon(Record* r, std::uint32_t seq) {
+    for (;;) {
+        std::uint32_t st = r->state.load(Acq);
+        if (seq_of(st) != seq) return false;  // already reclaimed by others
+        switch (phase_of(st)) {
+        case kWriting:
+        case kPosted:
+            if (r->state.compare_exchange_strong(st, make_state(seq, kFree), Rel, R)) return false;
+            break;
+        case kServing:
+            if (r->state.compare_exchange_strong(st, make_state(seq, kAbandoned), Rel, R)) return false;
+            break;
+        case kReplied:
+            return true;
+        default:
+            return false;
+        }
+    }
+}
+
+int take_reply(Record* r, std::uint32_t seq, void* reply, std::uint32_t cap, std::uint32_t* reply_len) {
+    const int status = r->status;
+    std::uint32_t n = r->len;
+    if (reply_len) *reply_len = n;
+    if (n > cap) n = cap;
+    if (reply && n) std::memcpy(reply, payload_of(r), n);
+    r->state.store(make_state(seq, kFree), Rel);
+    return status;
+}
+
+}  // namespace
+
+void set_error(const char* fmt, ...) {
+    va_list ap;
+    va_start(ap, fmt);
+    std::vsnprintf(t_error, sizeof t_error, fmt, ap);
+    va_end(ap);
+}
+
+}  // namespace chm::xmail
+
+extern "C" const char* chm_rtpu_last_error(void) { return chm::xmail::t_error; }
+
+namespace chm::xmail {
+
+unsigned reclaim(const bp::View& v, bp::RingHeader* ring) {
+    unsigned freed = 0;
+    const std::uint32_t now = bp::mono_ms();
+    for (std::uint32_t i = 0; i < ring->capacity; ++i) {
+        Record* r = record_at(ring, i);
+        std::uint32_t st = r->state.load(Acq);
+        const Phase p = phase_of(st);
+        if (p != kWriting && p != kPosted && p != kReplied) continue;
+        const std::uint32_t owner = r->owner.load(R);
+        bool dead = !bp::token_alive(v, owner, false);
+        if (!dead && p == kWriting && std::int32_t(now - r->stamp_ms.load(R)) > std::int32_t(kStaleWriteMs))
+            dead = true;  // alive but stuck mid-write: its post will fail (-ETIMEDOUT)
+        if (dead && r->state.compare_exchange_strong(st, make_state(seq_of(st), kFree), Rel, R)) ++freed;
+    }
+    return freed;
+}
+
+int call(int rtpu, Kind kind, const void* req, std::uint32_t len, void* reply, std::uint32_t cap,
+         std::uint32_t* reply_len, std::uint64_t timeout_ns) {
+    t_error[0] = 0;
+    if (reply_len) *reply_len = 0;
+    bp::Attachment* a = bp::current();
+    if (!a) return set_error("not attached to a backplane"), -ENOTCONN;
+    if (rtpu < 0 || std::uint32_t(rtpu) >= a->slots())
+        return set_error("RTPU %d out of range (slots 0..%u)", rtpu, a->slots() - 1), -ECHRNG;
+    if (port::on_kernel_thread() && kernel::g_k.in_irq)
+        return set_error("express mail from an interrupt handler"), -EPERM;
+    if (std::uint32_t(rtpu) == a->slot && port::on_kernel_thread() && !ipc::waits_as_task())
+        return set_error("request to this RTPU from its kernel thread outside a task"), -EDEADLK;
+
+    bp::RtpuEntry* e = a->rtpu(std::uint32_t(rtpu));
+    const std::uint32_t st = e->status.load(Acq);
+    const bp::SlotState state = bp::status_state(st);
+    if (state != bp::SlotState::Running || e->kind.load(R) != std::uint32_t(bp::SlotKind::Rtpu)) {
+        if (state == bp::SlotState::Running)
+            set_error("slot %d is a host program, not an RTPU", rtpu);
+        else
+            set_error("RTPU %d is not running (slot %s)", rtpu, state_name(state));
+        return -EHOSTDOWN;
+    }
+    bp::RingHeader* ring = a->ring(std::uint32_t(rtpu));
+    if (ring->record_size < kRecordMin)
+        return set_error("ring records of %u bytes are below %u", ring->record_size, kRecordMin), -EMSGSIZE;
+    if (len > ring->record_size - sizeof(Record))
+        return set_error("request of %u bytes exceeds a ring record's %zu", len,
+                         std::size_t(ring->record_size - sizeof(Record))), -EMSGSIZE;
+
+    const std::uint64_t start = now_ns();
+    const std::uint64_t deadline = start + timeout_ns;
+
+    // 1. Claim a record (wait, bounded, while the ring is full).
+    Record* r = nullptr;
+    std::uint32_t seq = 0;
+    for (bool reclaimed = false;;) {
+        const std::uint64_t now = now_ns();
+        if (now >= deadline) return set_error("RTPU %d: ring full for the whole timeout", rtpu), -EBUSY;
+        int lr = bp::lock_acquire(*a, &ring->lock, a->token, bp::kInternalPollNs, deadline - now);
+        if (lr == -ETIMEDOUT) return set_error("RTPU %d: ring lock busy for the whole timeout", rtpu), -EBUSY;
+        // -EOWNERDEAD: a sender died claiming; every claim step leaves a
+        // consistent record, so there is nothing to repair.
+        bp::lock_clear_dirty(&ring->lock);
+        r = claim_locked(ring, a->token, &seq);
+        if (!r && !reclaimed) {
+            reclaim(*a, ring);
+            reclaimed = true;
+            r = claim_locked(ring, a->token, &seq);
+        }
+        bp::lock_release(&ring->lock);
+        if (r) break;
+        if (e->status.load(Acq) != st)
+            return set_error("RTPU %d left or died (its ring was full)", rtpu), -EHOSTDOWN;
+        bp::relinquish(1'000'000);
+        reclaimed = false;
+    }
+
+    // 2. Write and post.
+    r->kind = kind;
+    r->status = 0;
+    r->len = len;
+    r->server = 0;
+    r->waiter_task.store(ipc::waits_as_task() ? 1 : 0, R);
+    r->reply.store(0, R);
+    if (len) std::memcpy(payload_of(r), req, len);
+    std::uint32_t expect = make_state(seq, kWriting);
+    if (!r->state.compare_exchange_strong(expect, make_state(seq, kPosted), Rel, R))
+        return set_error("RTPU %d: request reclaimed as stale while being written", rtpu), -ETIMEDOUT;
+    ipc::wake_ring(std::uint32_t(rtpu), ipc::kVecExpressMail);
+
+    // 3. Wait for the reply, in slices, watching the target.
+    auto* word = reinterpret_cast<std::uint32_t*>(&r->reply);
+    for (;;) {
+        if (phase_of(r->state.load(Acq)) == kReplied)
+            return take_reply(r, seq, reply, cap, reply_len);
+        const std::uint64_t now = now_ns();
+        const bool late = now >= deadline;
+        const bool gone = e->status.load(Acq) != st;
+        if (late || gone) {
+            if (abandon(r, seq)) return take_reply(r, seq, reply, cap, reply_len);
+            if (gone) {
+                set_error("RTPU %d left or died before replying (slot %s)", rtpu,
+                          state_name(bp::status_state(e->status.load(Acq))));
+                return -EHOSTDOWN;
+            }
+            set_error("RTPU %d did not reply within %llu ms", rtpu,
+                      static_cast<unsigned long long>(timeout_ns / 1000000));
+            return -ETIMEDOUT;
+        }
+        std::int64_t slice = std::int64_t(deadline - now);
+        if (slice > kSliceNs) slice = kSliceNs;
+        ipc::wait_word(word, slice);  // -EINTR (a user signal): keep waiting, bounded
+    }
+}
+
+}  // namespace chm::xmail

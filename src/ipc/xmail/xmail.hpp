@@ -1,0 +1,158 @@
+// Express mail: each RTPU's ring of request records in the backplane (the
+// region layout.hpp reserves), served by that RTPU's server task; replies
+// go back in the same record. Public calls: include/chimera/rtpu.h.
+//
+// A record's life (the `state` word is seq << 4 | phase, so a party that
+// holds an old view of a record can never change a later use of it):
+//
+//   FREE --claim (ring lock)--> WRITING --sender--> POSTED --server--> SERVING
+//   SERVING --server--> REPLIED --sender reads--> FREE
+//   sender gives up: POSTED -> FREE, SERVING -> ABANDONED (server frees it)
+//   a dead owner's WRITING / POSTED / REPLIED record, or one WRITING for
+//   over kStaleWriteMs: reclaimed -> FREE (by the server, or by a sender
+//   that finds the ring full); a new server of the slot frees whatever its
+//   dead predecessor left SERVING or ABANDONED.
+//
+// Only the claim takes the ring's robust lock (RingHeader::lock), and only
+// for a scan and three stores: the owner token is written before the state
+// leaves FREE, so a sender killed at any instruction leaves either a free
+// record or one that names it. RingHeader words: head = claim sequence,
+// tail = token of the RTPU whose server serves the ring (0: none),
+// reserved[0] = requests served (statistics).
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "chimera/task.h"
+#include "ipc/backplane/backplane.hpp"
+
+namespace chm::xmail {
+
+enum Phase : std::uint32_t {
+    kFree = 0, kWriting = 1, kPosted = 2, kServing = 3, kReplied = 4, kAbandoned = 5
+};
+constexpr std::uint32_t make_state(std::uint32_t seq, Phase p) { return seq << 4 | p; }
+constexpr Phase phase_of(std::uint32_t st) { return Phase(st & 0xF); }
+constexpr std::uint32_t seq_of(std::uint32_t st) { return st >> 4; }
+
+// The first 64 bytes of every ring record; the payload follows (request,
+// then the reply in its place).
+struct Record {
+    bp::A32 state;        // seq << 4 | Phase
+    bp::A32 owner;        // sender's token (layout.hpp), written before the claim
+    bp::A32 stamp_ms;     // monotonic ms of the claim
+    bp::A32 reply;        // futex word: 0 until the reply is in
+    bp::A32 waiter_task;  // 1: the sender waits as a task (woken through its doorbell)
+    std::uint32_t kind;   // Kind
+    std::int32_t status;  // the server's result: >= 0 or -errno
+    std::uint32_t len;    // request bytes, then reply bytes
+    std::uint32_t server; // token of the server that took it
+    std::uint32_t reserved[7];
+};
+static_assert(bp::kShared<Record> && sizeof(Record) == 64);
+inline constexpr std::uint32_t kRecordMin = 128;   // CHM_RTPU_RECORD_MIN
+inline constexpr std::uint32_t kStaleWriteMs = 2000;
+
+enum Kind : std::uint32_t {
+    kPing = 1, kSpawn, kSignal, kTasks, kFind, kDestroy, kStop, kKindEnd
+};
+
+// ------------------------------------------------------------ wire formats
+// Fixed offsets on every target (m68k aligns 64-bit fields to 2 bytes, so
+// every uint64_t sits at a multiple of 8 by construction).
+
+struct PingReply {
+    std::int32_t pid;
+    std::uint32_t tasks;
+    std::uint32_t policy;
+    std::uint32_t served;
+    std::uint64_t uptime_ns;
+};
+static_assert(sizeof(PingReply) == 24);
+
+// SpawnRequest, then `text_len` bytes: path NUL, argv[0] NUL, ... argv[argc-1] NUL.
+struct SpawnRequest {
+    std::int32_t argc;
+    std::uint32_t text_len;
+};
+// SpawnReply, then the loader's message (NUL-terminated) when it failed.
+struct SpawnReply {
+    std::int32_t tid;
+    std::int32_t program;
+};
+
+struct TaskRequest {  // kSignal, kDestroy
+    std::int32_t tid;
+    std::int32_t signo;
+};
+
+struct FindRequest {
+    char name[CHM_TASK_NAME_MAX + 1];
+};
+
+struct TasksRequest {
+    std::uint32_t start;  // first task slot to look at
+    std::uint32_t max;    // entries wanted at most
+};
+struct TaskEntry {
+    std::int32_t id;
+    std::uint32_t state;
+    std::int32_t priority;
+    std::uint32_t critical;
+    std::uint64_t period_ns, cpu_ns, cycles, misses;
+    char name[CHM_TASK_NAME_MAX + 1];
+};
+static_assert(sizeof(TaskEntry) == 80);
+// TasksReply, then `count` TaskEntry.
+struct TasksReply {
+    std::uint32_t total;  // tasks alive
+    std::uint32_t next;   // slot to ask for next; kTasksEnd: that was all
+    std::uint32_t count;
+    std::uint32_t pad;
+};
+inline constexpr std::uint32_t kTasksEnd = 0xFFFFFFFFu;
+
+struct StopRequest {
+    std::int32_t code;
+};
+
+// ------------------------------------------------------------ sender side
+
+// Send one request to RTPU `rtpu` and wait for its reply (bounded by
+// timeout_ns). The reply's payload goes into reply[0..cap) and its length
+// into *reply_len. Returns the server's status (>= 0 or -errno) or one of
+// the transport errors in chimera/rtpu.h; `why` (thread-local, for
+// chm_rtpu_last_error) is set on a transport error.
+int call(int rtpu, Kind kind, const void* req, std::uint32_t len, void* reply, std::uint32_t cap,
+         std::uint32_t* reply_len, std::uint64_t timeout_ns);
+
+// Reclaim records of `ring` whose owner died or whose write went stale.
+// Any process; returns the number freed.
+unsigned reclaim(const bp::View& v, bp::RingHeader* ring);
+
+// A record of a ring (index < capacity).
+inline Record* record_at(bp::RingHeader* ring, std::uint32_t i) {
+    return reinterpret_cast<Record*>(reinterpret_cast<char*>(ring + 1) +
+                                     std::size_t(i) * ring->record_size);
+}
+inline char* payload_of(Record* r) { return reinterpret_cast<char*>(r + 1); }
+
+void set_error(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
+
+// ------------------------------------------------------------ server side
+
+// On the kernel thread of an RTPU that joined the backplane and bound its
+// kernel (ipc::wake_bind_kernel), before chm_kernel_run: free what a dead
+// predecessor left in this slot's ring, spawn the server task (`priority`)
+// and install its interrupt handler (ipc::kVecExpressMail). Errors:
+// -ENOTCONN not joined as an RTPU; -EMSGSIZE ring records below
+// kRecordMin; -EBUSY already started; -ENOMEM; chm_task_spawn's errors.
+int server_start(int priority);
+// Stop serving (the ring's server word is cleared; later requests fail
+// with -EHOSTDOWN once the slot is left). Kernel thread, after run.
+void server_stop();
+// The server task, or CHM_TID_NONE.
+chm_tid_t server_task();
+
+}  // namespace chm::xmail

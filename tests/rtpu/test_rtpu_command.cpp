@@ -1,0 +1,175 @@
+// The chimera command (start / status / stop / rm) and chimera-rtpu's
+// command line, run as real processes; bad input gives one clear line and
+// a non-zero exit, and leaves nothing behind.
+#include "rtpu_fixture.hpp"
+
+using namespace chm::test;
+
+namespace {
+
+bool contains(const std::string& s, const std::string& what) { return s.find(what) != std::string::npos; }
+
+bool exists(const std::string& p) { return access(p.c_str(), F_OK) == 0; }
+
+}  // namespace
+
+TEST_F(RtpuTest, ChimeraStartStatusStopRmRoundTrip) {
+    const std::string probe = dir_ + "/probe.txt";
+    Outcome r = chimera({"start", "--rtpus", "2", "--program", std::string("2:") + PROBE_SO + ":" + probe});
+    ASSERT_EQ(r.status, 0) << r.out << r.err;
+    EXPECT_TRUE(contains(r.out, "started 2 RTPUs")) << r.out;
+    EXPECT_TRUE(exists(bp_));
+    EXPECT_TRUE(exists(bp_ + ".rtpu1.log"));
+    EXPECT_TRUE(exists(bp_ + ".rtpu2.log"));
+    EXPECT_TRUE(wait_text(probe, "main")) << read_file(bp_ + ".rtpu2.log");
+
+    r = chimera({"status"});
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_TRUE(contains(r.out, "RTPU 1 (rtpu1")) << r.out;
+    EXPECT_TRUE(contains(r.out, "RTPU 2 (rtpu2")) << r.out;
+    EXPECT_TRUE(contains(r.out, "RUNNING")) << r.out;
+    EXPECT_TRUE(contains(r.out, "probe.so")) << r.out;
+    EXPECT_TRUE(contains(r.out, "xmail")) << r.out;
+    EXPECT_TRUE(contains(r.out, "MISSES")) << r.out;
+
+    // A second start on the same numbers: they are taken.
+    r = chimera({"start", "--rtpus", "1"});
+    EXPECT_EQ(r.status, 1);
+    EXPECT_TRUE(contains(r.err, "RTPU 1 failed to start")) << r.err;
+    EXPECT_TRUE(contains(r.err, "belongs to live process")) << r.err;
+    EXPECT_TRUE(exists(bp_));  // not ours to remove
+
+    // rm refuses while RTPUs run.
+    r = chimera({"rm"});
+    EXPECT_EQ(r.status, 1);
+    EXPECT_TRUE(contains(r.err, "in use by RTPU 1")) << r.err;
+
+    r = chimera({"stop"});
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_TRUE(contains(r.out, "RTPU 1 (pid")) << r.out;
+    EXPECT_TRUE(contains(r.out, "RTPU 2 (pid")) << r.out;
+    EXPECT_FALSE(contains(r.out, "killed")) << r.out;
+    EXPECT_TRUE(wait_text(probe, "hook")) << read_file(probe);  // shutdown hooks ran
+    EXPECT_TRUE(contains(read_file(bp_ + ".rtpu2.log"), "stopped by")) << read_file(bp_ + ".rtpu2.log");
+
+    r = chimera({"status"});
+    EXPECT_EQ(r.status, 0);
+    EXPECT_TRUE(contains(r.out, "no RTPU running")) << r.out;
+
+    r = chimera({"rm"});
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_FALSE(exists(bp_));
+    EXPECT_FALSE(exists(bp_ + ".rtpu1.log"));
+    EXPECT_FALSE(exists(bp_ + ".rtpu2.log"));
+}
+
+TEST_F(RtpuTest, ChimeraStopKillsAnRtpuThatWillNotStop) {
+    Outcome r = chimera({"start", "--rtpus", "1"});
+    ASSERT_EQ(r.status, 0) << r.err;
+    ASSERT_EQ(chm_bp_attach_host(bp_.c_str(), "test", nullptr), 0);
+    chm_bp_status_t st;
+    ASSERT_EQ(chm_bp_status(&st), 0);
+    const pid_t pid = st.slot[1].pid;
+    ASSERT_GT(pid, 0);
+    kill(pid, SIGSTOP);  // SIGTERM stays pending: it must be killed
+    r = chimera({"stop", "--timeout", "0.3"});
+    EXPECT_EQ(r.status, 0) << r.err;
+    EXPECT_TRUE(contains(r.out, "killed")) << r.out;
+    EXPECT_TRUE(wait_slot(1, CHM_BP_DEAD)) << "state " << st.slot[1].state;
+}
+
+TEST_F(RtpuTest, ChimeraBadInputGivesOneClearLine) {
+    struct Case {
+        std::vector<std::string> args;
+        bool with_backplane;
+        int status;
+        const char* says;
+    };
+    const std::string text = dir_ + "/text.bp";
+    { std::ofstream(text) << "not a backplane\n"; }
+    const std::string notso = dir_ + "/text.so";
+    { std::ofstream(notso) << "not an ELF file\n"; }
+    const Case cases[] = {
+        {{"frob"}, false, 2, "unknown command \"frob\""},
+        {{"start", "--rtpus", "0"}, true, 2, "--rtpus wants 1..30"},
+        {{"start", "--rtpus", "two"}, true, 2, "--rtpus wants 1..30"},
+        {{"start", "--rtpus"}, true, 2, "option --rtpus needs a value"},
+        {{"start", "--program", "nocolon"}, true, 2, "RTPU:PATH"},
+        {{"start", "--program", "1:"}, true, 2, "no program path"},
+        {{"start", "--program", "1:/no/such.so"}, true, 1, "/no/such.so: No such file"},
+        {{"start", "--rtpus", "1", "--program", std::string("2:") + PROBE_SO}, true, 2, "only 1 RTPUs"},
+        {{"start", "--policy", "fifo"}, true, 2, "unknown policy \"fifo\""},
+        {{"start", "--timeout", "-1"}, true, 2, "--timeout wants seconds"},
+        {{"start", "--rtpus", "1", "--program", "1:" + notso}, true, 1, "cannot load"},
+        {{"status", "--bogus"}, true, 2, "unknown option --bogus"},
+        {{"status"}, true, 1, "no backplane at"},
+        {{"stop"}, true, 1, "no backplane at"},
+        {{"rm"}, true, 1, "no backplane at"},
+        {{"rm", "--backplane", text}, false, 1, "not a usable backplane file"},
+    };
+    for (const Case& c : cases) {
+        std::vector<std::string> args = c.args;
+        const Outcome r = chimera(args, c.with_backplane);
+        std::string all;
+        for (auto& a : c.args) all += a + " ";
+        EXPECT_EQ(r.status, c.status) << all << "\n" << r.out << r.err;
+        EXPECT_TRUE(contains(r.err, c.says)) << all << ": " << r.err;
+        EXPECT_EQ(count_lines(r.err), 1) << all << ": " << r.err;
+        EXPECT_FALSE(exists(bp_)) << all;  // a failed start leaves no backplane behind
+        EXPECT_FALSE(exists(bp_ + ".rtpu1.log")) << all;
+    }
+    EXPECT_TRUE(exists(text));  // rm refused it
+    const Outcome help = chimera({"--help"}, false);
+    EXPECT_EQ(help.status, 0);
+    EXPECT_TRUE(contains(help.out, "usage: chimera start"));
+}
+
+TEST_F(RtpuTest, ChimeraRtpuBadInputGivesOneClearLine) {
+    create(false);
+    const std::string notso = dir_ + "/text.so";
+    { std::ofstream(notso) << "not an ELF file\n"; }
+    const std::string missing = dir_ + "/missing.bp";
+    struct Case {
+        std::vector<std::string> args;
+        int status;
+        const char* says;
+    };
+    const Case cases[] = {
+        {{}, 2, "--rtpu N is required"},
+        {{"--rtpu", "x"}, 2, "--rtpu wants an RTPU number"},
+        {{"--rtpu", "0", "--backplane", bp_}, 2, "RTPU 0 is the host server"},
+        {{"--rtpu"}, 2, "option --rtpu needs a value"},
+        {{"--rtpu", "1", "--policy", "fifo"}, 2, "unknown policy \"fifo\""},
+        {{"--rtpu", "1", "--frob"}, 2, "unknown option --frob"},
+        {{"--rtpu", "1", "--backplane", missing}, 1, "No such file"},
+        {{"--rtpu", "1", "--backplane", notso}, 1, "cannot join as RTPU 1"},
+        {{"--rtpu", "9", "--backplane", bp_}, 1, "out of range"},
+        {{"--rtpu", "1", "--backplane", bp_, dir_ + "/none.so"}, 1, "none.so: No such file"},
+        {{"--rtpu", "1", "--backplane", bp_, notso}, 1, "cannot load"},
+        {{"--rtpu", "1", "--backplane", bp_, NOMAIN_SO}, 1, "cannot load"},
+    };
+    for (const Case& c : cases) {
+        std::vector<std::string> args = {CHIMERA_RTPU_BIN};
+        args.insert(args.end(), c.args.begin(), c.args.end());
+        const Outcome r = run(args);
+        std::string all;
+        for (auto& a : c.args) all += a + " ";
+        EXPECT_EQ(r.status, c.status) << all << "\n" << r.out << r.err;
+        EXPECT_TRUE(contains(r.err, c.says)) << all << ": " << r.err;
+        EXPECT_EQ(count_lines(r.err), 1) << all << ": " << r.err;
+    }
+    // A taken number: the second process says who has it.
+    ASSERT_EQ(chm_bp_attach_host(bp_.c_str(), "test", nullptr), 0);
+    const pid_t p1 = start_rtpu(1);
+    ASSERT_TRUE(wait_serving(1, p1));
+    const Outcome r = run({CHIMERA_RTPU_BIN, "--backplane", bp_, "--rtpu", "1"});
+    EXPECT_EQ(r.status, 1);
+    EXPECT_TRUE(contains(r.err, "belongs to live process " + std::to_string(p1))) << r.err;
+    EXPECT_EQ(count_lines(r.err), 1) << r.err;
+    // Failed loads left the slot free for the next one; a failed start
+    // did not disturb the running RTPU.
+    EXPECT_EQ(chm_rtpu_ping(1, nullptr), 0);
+    const Outcome help = run({CHIMERA_RTPU_BIN, "--help"});
+    EXPECT_EQ(help.status, 0);
+    EXPECT_TRUE(contains(help.out, "usage: chimera-rtpu"));
+}

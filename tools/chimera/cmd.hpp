@@ -1,0 +1,36 @@
+// The `chimera` command's pieces: start (main.cpp), status, stop and rm
+// (ops.cpp), and what they share.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+namespace chimera_cmd {
+
+// Every subcommand's options; each uses what concerns it.
+struct Options {
+    std::string backplane;      // resolved path
+    double timeout_s = -1;      // < 0: the subcommand's default
+    bool force = false;
+};
+
+// Print "chimera: <message>" on stderr.
+void say(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
+
+// Monotonic milliseconds.
+std::uint64_t mono_ms();
+void nap_ms(unsigned ms);
+
+// Log file of RTPU n of the system on `backplane`.
+std::string log_path(const std::string& backplane, int n);
+
+int cmd_status(const Options& o);
+int cmd_stop(const Options& o);
+int cmd_rm(const Options& o);
+
+// Stop every RTPU of the attached backplane: SIGTERM, wait up to
+// timeout_s, SIGKILL the rest. Prints one line per RTPU unless quiet.
+// Returns the number that had to be killed.
+int stop_attached(double timeout_s, bool quiet);
+
+}  // namespace chimera_cmd

@@ -1,0 +1,337 @@
+// chimera: start, show, stop and remove a whole Chimera system on one
+// backplane (docs/architecture.md, "RTPU processes and express mail").
+//
+//   chimera start  [--backplane PATH] [--rtpus N] [--program RTPU:PATH[:ARG...]]...
+//                  [--policy P] [--log-terminal] [--timeout S]
+//   chimera status [--backplane PATH]
+//   chimera stop   [--backplane PATH] [--timeout S]
+//   chimera rm     [--backplane PATH] [--force]
+//
+// start creates the backplane if absent and starts RTPUs 1..N as detached
+// chimera-rtpu processes (own session, stdin /dev/null, output to
+// PATH.rtpuN.log unless --log-terminal), then waits (bounded) until each
+// is RUNNING in the table and answers express mail. If any fails, the ones
+// it started are stopped and a backplane it created is removed.
+#include <cerrno>
+#include <climits>
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <string>
+#include <vector>
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include "chimera/bp.h"
+#include "chimera/rtpu.h"
+#include "cmd.hpp"
+
+using namespace chimera_cmd;
+
+namespace {
+
+void usage(FILE* f) {
+    std::fprintf(f,
+        "usage: chimera start  [--backplane PATH] [--rtpus N] [--program RTPU:PATH[:ARG...]]...\n"
+        "                      [--policy muf|rm|edf|mlf|fixed] [--log-terminal] [--timeout S]\n"
+        "       chimera status [--backplane PATH]\n"
+        "       chimera stop   [--backplane PATH] [--timeout S]\n"
+        "       chimera rm     [--backplane PATH] [--force]\n"
+        "\n"
+        "start   create the backplane PATH if absent (default $%s, else\n"
+        "        /dev/shm/chimera-$USER.bp) and start RTPUs 1..N (default 2) as\n"
+        "        chimera-rtpu processes, each with the programs given for it; their\n"
+        "        output goes to PATH.rtpuN.log (or this terminal with --log-terminal).\n"
+        "        Waits up to S seconds (default 10) until every RTPU runs and answers.\n"
+        "status  the RTPU table and each running RTPU's tasks (through express mail)\n"
+        "stop    SIGTERM every RTPU, wait up to S seconds (default 5), SIGKILL the rest\n"
+        "rm      remove the backplane file and its RTPU logs; refuses while processes\n"
+        "        are attached or when the file is not a backplane, unless --force\n",
+        CHM_BP_ENV);
+}
+
+[[noreturn]] void bad(const std::string& msg) {
+    say("%s (see chimera --help)", msg.c_str());
+    std::exit(2);
+}
+
+struct StartPlan {
+    int rtpus = 2;
+    std::string policy;
+    bool log_terminal = false;
+    std::vector<std::vector<std::string>> programs;  // per RTPU: chimera-rtpu's program arguments
+};
+
+bool parse_num(const char* s, long lo, long hi, long* out) {
+    if (!s || !*s) return false;
+    char* end = nullptr;
+    errno = 0;
+    const long v = std::strtol(s, &end, 10);
+    if (errno || *end || v < lo || v > hi) return false;
+    *out = v;
+    return true;
+}
+
+// "RTPU:PATH[:ARG...]": path made absolute (the RTPU may not share our
+// working directory for long), arguments split at ':'.
+void add_program(StartPlan* p, const char* spec) {
+    const std::string s(spec);
+    const std::size_t c1 = s.find(':');
+    long n = 0;
+    if (c1 == std::string::npos || !parse_num(s.substr(0, c1).c_str(), 1, 1000, &n))
+        bad("--program wants RTPU:PATH[:ARG...], not \"" + s + "\"");
+    std::vector<std::string> parts;
+    std::size_t at = c1 + 1;
+    for (;;) {
+        const std::size_t c = s.find(':', at);
+        parts.push_back(s.substr(at, c == std::string::npos ? std::string::npos : c - at));
+        if (c == std::string::npos) break;
+        at = c + 1;
+    }
+    if (parts[0].empty()) bad("--program " + s + ": no program path");
+    char real[PATH_MAX];
+    if (!realpath(parts[0].c_str(), real)) {
+        say("--program %s: %s: %s", spec, parts[0].c_str(), std::strerror(errno));
+        std::exit(1);
+    }
+    parts[0] = real;
+    if (std::size_t(n) > p->programs.size()) p->programs.resize(std::size_t(n));
+    auto& list = p->programs[std::size_t(n) - 1];
+    if (!list.empty()) list.push_back("--");
+    for (const std::string& a : parts) list.push_back(a);
+}
+
+// chimera-rtpu beside this executable (installed), in the build tree's
+// tools/chimera-rtpu, or on PATH; $CHIMERA_RTPU_BIN first.
+std::string find_rtpu_binary() {
+    if (const char* e = std::getenv("CHIMERA_RTPU_BIN")) return e;
+    char self[PATH_MAX];
+    const ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
+    if (n > 0) {
+        self[n] = 0;
+        std::string dir(self);
+        dir = dir.substr(0, dir.rfind('/'));
+        for (const std::string& c : {dir + "/chimera-rtpu", dir + "/../chimera-rtpu/chimera-rtpu"})
+            if (access(c.c_str(), X_OK) == 0) return c;
+    }
+    return "chimera-rtpu";  // execvp searches PATH
+}
+
+// The last non-empty line of a file (an RTPU's log), for error messages.
+std::string last_line(const std::string& path) {
+    FILE* f = std::fopen(path.c_str(), "r");
+    if (!f) return "";
+    char buf[512];
+    std::string last;
+    while (std::fgets(buf, sizeof buf, f)) {
+        std::string l(buf);
+        while (!l.empty() && (l.back() == '\n' || l.back() == '\r')) l.pop_back();
+        if (!l.empty()) last = l;
+    }
+    std::fclose(f);
+    return last;
+}
+
+pid_t launch(const Options& o, const StartPlan& p, int n, const std::string& bin) {
+    std::vector<std::string> args = {bin, "--backplane", o.backplane, "--rtpu", std::to_string(n)};
+    if (!p.policy.empty()) args.insert(args.end(), {"--policy", p.policy});
+    if (std::size_t(n) <= p.programs.size() && !p.programs[std::size_t(n) - 1].empty()) {
+        args.push_back("--");
+        for (const std::string& a : p.programs[std::size_t(n) - 1]) args.push_back(a);
+    }
+    const std::string log = log_path(o.backplane, n);
+    std::fflush(nullptr);
+    const pid_t pid = fork();
+    if (pid != 0) return pid;
+    // The child: detached from this command's session and terminal input.
+    setsid();
+    const int in = open("/dev/null", O_RDONLY);
+    if (in >= 0) dup2(in, 0);
+    if (!p.log_terminal) {
+        const int out = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+        if (out < 0) {
+            std::fprintf(stderr, "chimera: cannot open %s: %s\n", log.c_str(), std::strerror(errno));
+            _exit(127);
+        }
+        dup2(out, 1);
+        dup2(out, 2);
+    }
+    sigset_t none;
+    sigemptyset(&none);
+    sigprocmask(SIG_SETMASK, &none, nullptr);
+    std::vector<char*> argv;
+    for (std::string& a : args) argv.push_back(a.data());
+    argv.push_back(nullptr);
+    execvp(argv[0], argv.data());
+    std::fprintf(stderr, "chimera: cannot run %s: %s\n", argv[0], std::strerror(errno));
+    _exit(127);
+}
+
+int cmd_start(const Options& o, const StartPlan& p) {
+    if (p.programs.size() > std::size_t(p.rtpus))
+        bad("--program for RTPU " + std::to_string(p.programs.size()) + " but only " + std::to_string(p.rtpus) +
+            " RTPUs are started (--rtpus)");
+    bool created = false;
+    if (access(o.backplane.c_str(), F_OK) != 0) {
+        chm_bp_config_t cfg;
+        chm_bp_config_init(&cfg);
+        cfg.ring_records = 32;
+        cfg.ring_record_size = 1024;  // a spawn request carries a path and arguments
+        if (std::uint32_t(p.rtpus) + 2 > cfg.rtpu_slots) bad("--rtpus at most " + std::to_string(cfg.rtpu_slots - 2));
+        if (int r = chm_bp_create(o.backplane.c_str(), &cfg)) {
+            say("cannot create the backplane: %s (%s)", chm_bp_last_error(), std::strerror(-r));
+            return 1;
+        }
+        created = true;
+    }
+    const std::string bin = find_rtpu_binary();
+    std::vector<pid_t> pids(std::size_t(p.rtpus) + 1, 0);
+    for (int n = 1; n <= p.rtpus; ++n) pids[std::size_t(n)] = launch(o, p, n, bin);
+
+    // Watch them come up: through the table and a ping each.
+    std::string failure;
+    if (int r = chm_bp_attach_host(o.backplane.c_str(), "chimera", nullptr)) {
+        failure = std::string("cannot attach to watch the RTPUs: ") + chm_bp_last_error() + " (" +
+                  std::strerror(-r) + ")";
+    }
+    chm_bp_status_t st;
+    if (failure.empty() && chm_bp_status(&st) == 0 && std::uint32_t(p.rtpus) >= st.slots - 1)
+        failure = "--rtpus " + std::to_string(p.rtpus) + " needs more slots than the backplane's " +
+                  std::to_string(st.slots);
+    const double limit = o.timeout_s < 0 ? 10.0 : o.timeout_s;
+    const std::uint64_t end = mono_ms() + std::uint64_t(limit * 1000);
+    std::vector<bool> ready(pids.size(), false);
+    chm_rtpu_timeout_set(200'000'000);
+    for (int waiting = p.rtpus; failure.empty() && waiting > 0;) {
+        for (int n = 1; n <= p.rtpus && failure.empty(); ++n) {
+            if (ready[std::size_t(n)]) continue;
+            int ws = 0;
+            if (waitpid(pids[std::size_t(n)], &ws, WNOHANG) == pids[std::size_t(n)]) {
+                pids[std::size_t(n)] = 0;
+                std::string why = p.log_terminal ? "" : last_line(log_path(o.backplane, n));
+                if (why.empty())
+                    why = WIFSIGNALED(ws) ? std::string("killed by ") + strsignal(WTERMSIG(ws))
+                                          : "exit status " + std::to_string(WEXITSTATUS(ws));
+                failure = "RTPU " + std::to_string(n) + " failed to start: " + why;
+                break;
+            }
+            chm_bp_status(&st);
+            const chm_bp_slot_info_t& s = st.slot[n];
+            if (s.state == CHM_BP_RUNNING && s.pid == pids[std::size_t(n)] && chm_rtpu_ping(n, nullptr) == 0) {
+                ready[std::size_t(n)] = true;
+                --waiting;
+            }
+        }
+        if (!failure.empty() || waiting == 0) break;
+        if (mono_ms() >= end) {
+            failure = "RTPUs not running within " + std::to_string(limit) + " s";
+            break;
+        }
+        nap_ms(20);
+    }
+    if (failure.empty()) {
+        std::printf("started %d RTPU%s on %s:", p.rtpus, p.rtpus == 1 ? "" : "s", o.backplane.c_str());
+        for (int n = 1; n <= p.rtpus; ++n) std::printf(" %d (pid %d)", n, int(pids[std::size_t(n)]));
+        std::printf("\n");
+        if (!p.log_terminal) std::printf("logs: %s\n", log_path(o.backplane, 1).c_str());
+        std::fflush(stdout);
+        chm_bp_leave();
+        return 0;
+    }
+    // All or nothing: stop what we started, remove what we created.
+    say("%s", failure.c_str());
+    for (pid_t pid : pids)
+        if (pid > 0) kill(pid, SIGTERM);
+    const std::uint64_t kend = mono_ms() + 3000;
+    for (pid_t pid : pids) {
+        if (pid <= 0) continue;
+        while (waitpid(pid, nullptr, WNOHANG) == 0 && mono_ms() < kend) nap_ms(10);
+        if (kill(pid, 0) == 0) {
+            kill(pid, SIGKILL);
+            waitpid(pid, nullptr, 0);
+        }
+    }
+    chm_bp_leave();
+    if (created) {
+        unlink(o.backplane.c_str());
+        for (int n = 1; n <= p.rtpus; ++n) unlink(log_path(o.backplane, n).c_str());
+    }
+    return 1;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    if (argc < 2) {
+        usage(stderr);
+        return 2;
+    }
+    const std::string cmd = argv[1];
+    if (cmd == "--help" || cmd == "-h" || cmd == "help") {
+        usage(stdout);
+        return 0;
+    }
+    if (cmd != "start" && cmd != "status" && cmd != "stop" && cmd != "rm")
+        bad("unknown command \"" + cmd + "\" (start, status, stop or rm)");
+    Options o;
+    StartPlan plan;
+    std::vector<const char*> programs;
+    const char* backplane = nullptr;
+    for (int i = 2; i < argc; ++i) {
+        const std::string a = argv[i];
+        auto value = [&]() -> const char* {
+            if (i + 1 >= argc) bad("option " + a + " needs a value");
+            return argv[++i];
+        };
+        const bool starting = cmd == "start";
+        if (a == "--help" || a == "-h") {
+            usage(stdout);
+            return 0;
+        } else if (a == "--backplane") {
+            backplane = value();
+            if (!*backplane) bad("--backplane needs a path");
+        } else if (a == "--timeout" && cmd != "status" && cmd != "rm") {
+            const char* v = value();
+            char* end = nullptr;
+            o.timeout_s = std::strtod(v, &end);
+            if (!*v || *end || !(o.timeout_s > 0) || o.timeout_s > 3600)
+                bad(std::string("--timeout wants seconds (0..3600], not \"") + v + "\"");
+        } else if (a == "--rtpus" && starting) {
+            const char* v = value();
+            long n = 0;
+            if (!parse_num(v, 1, 30, &n)) bad(std::string("--rtpus wants 1..30, not \"") + v + "\"");
+            plan.rtpus = int(n);
+        } else if (a == "--program" && starting) {
+            programs.push_back(value());
+        } else if (a == "--policy" && starting) {
+            plan.policy = value();
+            if (plan.policy != "muf" && plan.policy != "rm" && plan.policy != "edf" && plan.policy != "mlf" &&
+                plan.policy != "fixed")
+                bad("unknown policy \"" + plan.policy + "\" (muf, rm, edf, mlf or fixed)");
+        } else if (a == "--log-terminal" && starting) {
+            plan.log_terminal = true;
+        } else if (a == "--force" && cmd == "rm") {
+            o.force = true;
+        } else {
+            bad("chimera " + cmd + ": unknown option " + a);
+        }
+    }
+    if (backplane) {
+        o.backplane = backplane;
+    } else {
+        char path[4096];
+        if (chm_bp_default_path(path, sizeof path) != 0) bad("default backplane path too long");
+        o.backplane = path;
+    }
+    if (cmd == "start") {
+        for (const char* spec : programs) add_program(&plan, spec);
+        return cmd_start(o, plan);
+    }
+    if (cmd == "status") return cmd_status(o);
+    if (cmd == "stop") return cmd_stop(o);
+    return cmd_rm(o);
+}

@@ -1,0 +1,263 @@
+// chimera status / stop / rm (cmd.hpp).
+#include <cerrno>
+#include <csignal>
+#include <cstdarg>
+#include <cstdio>
+#include <cstring>
+#include <ctime>
+#include <string>
+#include <vector>
+
+#include <dirent.h>
+#include <unistd.h>
+
+#include "chimera/bp.h"
+#include "chimera/rtpu.h"
+#include "cmd.hpp"
+#include "ipc/backplane/backplane.hpp"
+
+namespace chimera_cmd {
+
+void say(const char* fmt, ...) {
+    va_list ap;
+    va_start(ap, fmt);
+    std::fprintf(stderr, "chimera: ");
+    std::vfprintf(stderr, fmt, ap);
+    std::fprintf(stderr, "\n");
+    va_end(ap);
+}
+
+std::uint64_t mono_ms() {
+    timespec ts{};
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return std::uint64_t(ts.tv_sec) * 1000u + std::uint64_t(ts.tv_nsec) / 1000000u;
+}
+
+void nap_ms(unsigned ms) {
+    timespec ts{time_t(ms / 1000), long(ms % 1000) * 1000000L};
+    nanosleep(&ts, nullptr);
+}
+
+std::string log_path(const std::string& backplane, int n) {
+    return backplane + ".rtpu" + std::to_string(n) + ".log";
+}
+
+namespace {
+
+const char* state_name(chm_bp_slot_state s) {
+    static const char* const kNames[] = {"FREE", "JOINING", "RUNNING", "LEAVING", "DEAD", "RECOVERING"};
+    return unsigned(s) < 6 ? kNames[s] : "?";
+}
+
+const char* task_state(chm_task_state s) {
+    static const char* const kNames[] = {"ready", "running", "blocked", "suspended", "waitperiod", "paused", "ended"};
+    return unsigned(s) < 7 ? kNames[s] : "?";
+}
+
+const char* policy_name(chm_sched_policy p) {
+    static const char* const kNames[] = {"MUF", "RM", "EDF", "MLF", "FIXED", "user"};
+    return unsigned(p) < 6 ? kNames[p] : "?";
+}
+
+// Attach to the backplane as a host for the length of one command.
+int attach(const Options& o) {
+    if (access(o.backplane.c_str(), F_OK) != 0) {
+        say("no backplane at %s (chimera start creates one)", o.backplane.c_str());
+        return -ENOENT;
+    }
+    if (int r = chm_bp_attach_host(o.backplane.c_str(), "chimera", nullptr)) {
+        say("cannot attach to %s: %s", o.backplane.c_str(), chm_bp_last_error());
+        return r;
+    }
+    return 0;
+}
+
+bool is_rtpu(const chm_bp_slot_info_t& s) {
+    return s.kind == CHM_BP_KIND_RTPU &&
+           (s.state == CHM_BP_RUNNING || s.state == CHM_BP_JOINING || s.state == CHM_BP_LEAVING);
+}
+
+void print_tasks(int slot) {
+    chm_rtpu_info_t info;
+    if (int r = chm_rtpu_ping(slot, &info)) {
+        std::printf("    (no reply: %s)\n", chm_rtpu_last_error()[0] ? chm_rtpu_last_error() : std::strerror(-r));
+        return;
+    }
+    static chm_rtpu_task_t tasks[512];
+    int total = 0;
+    const int n = chm_rtpu_tasks(slot, tasks, 512, &total);
+    if (n < 0) {
+        std::printf("    (no task list: %s)\n", chm_rtpu_last_error());
+        return;
+    }
+    std::printf("    %s, %d task%s, up %.1f s, %u requests served\n", policy_name(info.policy), total,
+                total == 1 ? "" : "s", double(info.uptime_ns) / 1e9, info.served);
+    std::printf("    %-8s %-20s %-10s %6s %9s %10s %10s %7s\n", "TID", "NAME", "STATE", "PRIO", "PERIOD",
+                "CPU ms", "CYCLES", "MISSES");
+    for (int i = 0; i < n; ++i) {
+        const chm_rtpu_task_t& t = tasks[i];
+        char period[32] = "-";
+        if (t.period_ns) std::snprintf(period, sizeof period, "%.3gms", double(t.period_ns) / 1e6);
+        std::printf("    %-8d %-20s %-10s %6d %9s %10.1f %10llu %7llu\n", int(t.id), t.name, task_state(t.state),
+                    t.priority, period, double(t.cpu_ns) / 1e6, static_cast<unsigned long long>(t.cycles),
+                    static_cast<unsigned long long>(t.misses));
+    }
+    if (total > n) std::printf("    ... %d more\n", total - n);
+}
+
+}  // namespace
+
+int cmd_status(const Options& o) {
+    if (attach(o)) return 1;
+    chm_bp_status_t st;
+    chm_bp_status(&st);
+    timespec now{};
+    clock_gettime(CLOCK_REALTIME, &now);
+    const double age = double(std::uint64_t(now.tv_sec) * 1000000000ull + std::uint64_t(now.tv_nsec) - st.created_ns) / 1e9;
+    std::printf("backplane %s: %u slots, created %.0f s ago, %u/%u named objects, common memory %u of %u bytes free, "
+                "%u recoveries\n",
+                o.backplane.c_str(), st.slots, age, st.objects, st.registry_capacity, st.common_free, st.common_size,
+                st.recoveries);
+    std::printf("%-5s %-5s %-11s %-8s %-10s %s\n", "SLOT", "KIND", "STATE", "PID", "HEARTBEAT", "NAME");
+    int rtpus = 0;
+    for (std::uint32_t s = 0; s < st.slots; ++s) {
+        const chm_bp_slot_info_t& i = st.slot[s];
+        if (i.state == CHM_BP_FREE || int(s) == st.self) continue;
+        char hb[32] = "-";
+        if (i.pid) std::snprintf(hb, sizeof hb, "%u ms", i.heartbeat_age_ms);
+        std::printf("%-5u %-5s %-11s %-8d %-10s %s\n", s,
+                    i.kind == CHM_BP_KIND_RTPU ? "rtpu" : i.kind == CHM_BP_KIND_HOST ? "host" : "-",
+                    state_name(i.state), int(i.pid), hb, i.name);
+        if (is_rtpu(i)) ++rtpus;
+    }
+    if (rtpus == 0) std::printf("no RTPU running\n");
+    for (std::uint32_t s = 0; s < st.slots; ++s) {
+        const chm_bp_slot_info_t& i = st.slot[s];
+        if (!is_rtpu(i) || i.state != CHM_BP_RUNNING) continue;
+        std::printf("RTPU %u (%s, pid %d):\n", s, i.name, int(i.pid));
+        print_tasks(int(s));
+    }
+    std::fflush(stdout);
+    chm_bp_leave();
+    return 0;
+}
+
+int stop_attached(double timeout_s, bool quiet) {
+    chm_bp_status_t st;
+    chm_bp_status(&st);
+    struct Victim {
+        int slot, pid;
+        std::uint32_t gen;
+        bool done;
+    };
+    std::vector<Victim> v;
+    for (std::uint32_t s = 0; s < st.slots; ++s)
+        if (is_rtpu(st.slot[s]) && st.slot[s].pid > 0) {
+            v.push_back({int(s), st.slot[s].pid, st.slot[s].generation, false});
+            kill(st.slot[s].pid, SIGTERM);
+        }
+    // Gone: the slot no longer holds that generation in a live state.
+    auto gone = [](const Victim& x) {
+        chm_bp_status_t now;
+        chm_bp_status(&now);
+        const chm_bp_slot_info_t& i = now.slot[x.slot];
+        return i.generation != x.gen || !(i.state == CHM_BP_RUNNING || i.state == CHM_BP_JOINING ||
+                                          i.state == CHM_BP_LEAVING) ||
+               i.pid != x.pid;
+    };
+    const std::uint64_t end = mono_ms() + std::uint64_t(timeout_s * 1000);
+    for (;;) {
+        bool all = true;
+        for (Victim& x : v)
+            if (!x.done) all = all && (x.done = gone(x));
+        if (all || mono_ms() >= end) break;
+        nap_ms(10);
+    }
+    int killed = 0;
+    for (Victim& x : v) {
+        if (x.done) {
+            if (!quiet) std::printf("RTPU %d (pid %d): stopped\n", x.slot, x.pid);
+            continue;
+        }
+        kill(x.pid, SIGKILL);
+        ++killed;
+        // Our monitor thread recovers the slot once the process is gone.
+        const std::uint64_t kend = mono_ms() + 3000;
+        while (!gone(x) && mono_ms() < kend) nap_ms(10);
+        if (!quiet)
+            std::printf("RTPU %d (pid %d): killed (did not stop within %.1f s)\n", x.slot, x.pid, timeout_s);
+    }
+    if (!quiet && v.empty()) std::printf("no RTPU running\n");
+    std::fflush(stdout);
+    return killed;
+}
+
+int cmd_stop(const Options& o) {
+    if (attach(o)) return 1;
+    stop_attached(o.timeout_s < 0 ? 5.0 : o.timeout_s, false);
+    chm_bp_status_t st;
+    chm_bp_status(&st);
+    int hosts = 0;
+    for (std::uint32_t s = 0; s < st.slots; ++s)
+        if (int(s) != st.self && st.slot[s].kind == CHM_BP_KIND_HOST && st.slot[s].state == CHM_BP_RUNNING) ++hosts;
+    if (hosts) std::printf("%d host program%s still attached\n", hosts, hosts == 1 ? "" : "s");
+    chm_bp_leave();
+    return 0;
+}
+
+int cmd_rm(const Options& o) {
+    const char* path = o.backplane.c_str();
+    if (access(path, F_OK) != 0) {
+        say("no backplane at %s", path);
+        return 1;
+    }
+    chm::bp::View v;
+    int fd = -1;
+    char why[320];
+    const int r = chm::bp::map_file(path, false, &v, &fd, why, sizeof why);
+    if (r && !o.force) {
+        say("%s is not a usable backplane file (%s): not removed (rm --force removes it anyway)", path, why);
+        return 1;
+    }
+    if (r == 0) {
+        std::string live;
+        for (std::uint32_t s = 0; s < v.slots(); ++s) {
+            const chm::bp::RtpuEntry* e = v.rtpu(s);
+            const auto state = chm::bp::status_state(e->status.load());
+            if (state == chm::bp::SlotState::Free || state == chm::bp::SlotState::Dead) continue;
+            const int pid = int(e->pid.load());
+            if (!chm::bp::proc_alive(pid, e->pid_start)) continue;
+            live += (live.empty() ? "" : ", ") + std::string(e->kind.load() == 2 ? "host " : "RTPU ") +
+                    std::to_string(s) + " (pid " + std::to_string(pid) + ")";
+        }
+        chm::bp::unmap(&v);
+        ::close(fd);
+        if (!live.empty() && !o.force) {
+            say("%s is in use by %s: run chimera stop first (or rm --force)", path, live.c_str());
+            return 1;
+        }
+    }
+    if (unlink(path) != 0) {
+        say("cannot remove %s: %s", path, std::strerror(errno));
+        return 1;
+    }
+    // Its RTPU logs (PATH.rtpuN.log).
+    const std::string p(path);
+    const std::size_t cut = p.rfind('/');
+    const std::string dir = cut == std::string::npos ? "." : p.substr(0, cut ? cut : 1);
+    const std::string base = (cut == std::string::npos ? p : p.substr(cut + 1)) + ".rtpu";
+    int logs = 0;
+    if (DIR* d = opendir(dir.c_str())) {
+        while (dirent* e = readdir(d)) {
+            const std::string n = e->d_name;
+            if (n.size() > base.size() + 4 && n.compare(0, base.size(), base) == 0 &&
+                n.compare(n.size() - 4, 4, ".log") == 0 && unlink((dir + "/" + n).c_str()) == 0)
+                ++logs;
+        }
+        closedir(d);
+    }
+    std::printf("removed %s%s\n", path, logs ? " and its RTPU logs" : "");
+    return 0;
+}
+
+}  // namespace chimera_cmd
