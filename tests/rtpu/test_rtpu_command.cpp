@@ -173,3 +173,22 @@ TEST_F(RtpuTest, ChimeraRtpuBadInputGivesOneClearLine) {
     EXPECT_EQ(help.status, 0);
     EXPECT_TRUE(contains(help.out, "usage: chimera-rtpu"));
 }
+
+// A backplane made elsewhere with rings too small for express mail: the
+// RTPUs still run (and say so); status says why it cannot list tasks.
+TEST_F(RtpuTest, ChimeraOnABackplaneWithoutExpressMail) {
+    create(false, 8, 64);
+    Outcome r = chimera({"start", "--rtpus", "1"});
+    ASSERT_EQ(r.status, 0) << r.err;
+    EXPECT_TRUE(contains(r.err, "no express mail")) << r.err;
+    EXPECT_TRUE(contains(read_file(bp_ + ".rtpu1.log"), "no express mail"));
+    r = chimera({"status"});
+    EXPECT_EQ(r.status, 0);
+    EXPECT_TRUE(contains(r.out, "RTPU 1 (rtpu1")) << r.out;
+    EXPECT_TRUE(contains(r.out, "below 128")) << r.out;
+    r = chimera({"stop"});
+    EXPECT_EQ(r.status, 0);
+    EXPECT_TRUE(contains(r.out, "RTPU 1 (pid")) << r.out;
+    EXPECT_FALSE(contains(r.out, "killed")) << r.out;
+    EXPECT_EQ(chimera({"rm"}).status, 0);
+}

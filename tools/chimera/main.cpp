@@ -206,6 +206,7 @@ int cmd_start(const Options& o, const StartPlan& p) {
     const std::uint64_t end = mono_ms() + std::uint64_t(limit * 1000);
     std::vector<bool> ready(pids.size(), false);
     chm_rtpu_timeout_set(200'000'000);
+    bool warned = false;
     for (int waiting = p.rtpus; failure.empty() && waiting > 0;) {
         for (int n = 1; n <= p.rtpus && failure.empty(); ++n) {
             if (ready[std::size_t(n)]) continue;
@@ -221,7 +222,14 @@ int cmd_start(const Options& o, const StartPlan& p) {
             }
             chm_bp_status(&st);
             const chm_bp_slot_info_t& s = st.slot[n];
-            if (s.state == CHM_BP_RUNNING && s.pid == pids[std::size_t(n)] && chm_rtpu_ping(n, nullptr) == 0) {
+            if (s.state != CHM_BP_RUNNING || s.pid != pids[std::size_t(n)]) continue;
+            const int ping = chm_rtpu_ping(n, nullptr);
+            if (ping == -EMSGSIZE && !warned) {  // an existing backplane with small rings
+                say("warning: %s: no express mail on this backplane (status cannot list tasks)",
+                    chm_rtpu_last_error());
+                warned = true;
+            }
+            if (ping == 0 || ping == -EMSGSIZE) {
                 ready[std::size_t(n)] = true;
                 --waiting;
             }
