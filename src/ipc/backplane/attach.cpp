@@ -73,7 +73,10 @@ void register_atfork() {
 void fill_slot(RtpuEntry* e, SlotKind kind, const char* name) {
     e->pid.store(std::uint32_t(::getpid()), R);
     e->pid_start = self_start_time();
-    e->tid.store(std::uint32_t(::syscall(SYS_gettid)), R);
+    // No kernel thread yet: a ring now must not send the timer signal to a
+    // thread that has no handler for it (its default action kills). The
+    // kernel publishes itself in ipc::wake_bind_kernel.
+    e->tid.store(0, R);
     e->kind.store(std::uint32_t(kind), R);
     e->mailbox.store(0, R);
     e->pending.store(0, R);
