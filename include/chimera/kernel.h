@@ -45,6 +45,11 @@ typedef struct chm_kernel_config {
                            * other tasks keep the CPU busy, their descriptors
                            * are polled this often; an idle RTPU waits on them
                            * directly. Default 1 ms; minimum 10 µs */
+    uint64_t idle_poll_ns; /* with nothing to run, poll the RTPU's mailbox
+                           * this long before sleeping: a wake-up from a busy
+                           * peer (remote V, message) then costs no system
+                           * call on either side, at the price of that much
+                           * CPU per idle period. Default 0 (sleep at once) */
 } chm_kernel_config_t;
 
 /* Fill `cfg` with the defaults above. */

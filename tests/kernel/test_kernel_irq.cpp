@@ -11,6 +11,7 @@
 #include "chimera/irq.h"
 #include "chimera/sem.h"
 #include "kernel_fixture.hpp"
+#include "port.hpp"
 
 namespace chm::test {
 namespace {
@@ -161,6 +162,35 @@ TEST_F(Irq, BadArgumentsAreNamed) {
     EXPECT_EQ(chm_irq_detach_fd(40), -ENOENT);
     EXPECT_EQ(chm_irq_raise(99), -EINVAL);
     EXPECT_EQ(chm_irq_remove(1), 0);
+}
+
+}  // namespace
+}  // namespace chm::test
+
+namespace chm::test {
+namespace {
+
+// With idle_poll_ns the idle RTPU spins on its doorbell before sleeping; a
+// ring then is just the bit: no futex wake, no signal. The raiser sees the
+// polling state and the waiting task still wakes.
+class IrqPoll : public Irq {};
+
+TEST_F(IrqPoll, ARingWhileTheRtpuPollsItsDoorbellWakesTheTask) {
+    chm_kernel_config_t cfg;
+    chm_kernel_config_init(&cfg);
+    cfg.idle_poll_ns = 2000 * kMs;  // longer than the test: it never sleeps
+    ASSERT_EQ(chm_kernel_init(&cfg), 0);
+    started_ = true;
+    ASSERT_EQ(chm_irq_install(4, v_handler, nullptr), 0);
+    spawn(waiter, reinterpret_cast<void*>(1), "waiter", 5);
+    static volatile uint32_t seen_state = 99;
+    later(30, [] {
+        seen_state = __atomic_load_n(chm::port::doorbell().state, __ATOMIC_SEQ_CST);
+        chm_irq_raise(4);
+    });
+    ASSERT_EQ(chm_kernel_run(), 0);
+    EXPECT_EQ(g_woke, 1);
+    EXPECT_EQ(seen_state, uint32_t(chm::port::kDbPolling)) << "the idle RTPU was not polling";
 }
 
 }  // namespace

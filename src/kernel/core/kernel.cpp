@@ -59,7 +59,7 @@ int idle_loop_locked() {
             continue;
         }
         timer_program_locked(now);
-        port::idle_wait_locked();
+        port::idle_wait_locked(g_k.cfg.idle_poll_ns);
         if (port::g_irq.pending) {
             port::g_irq.pending = 0;
             g_k.armed_at = 0;
@@ -183,8 +183,8 @@ void chm_kernel_fini(void) {
     }
     port::irq_set_pending_hook(nullptr);
     port::chm_port_preempt_hook = nullptr;
-    err_kernel_fini();
     irq_reset();
+    err_kernel_fini();
     // Keep the reserved TCB array and the heaps' storage for a next init;
     // reset everything else.
     Tcb* tcbs = g_k.tcbs;
