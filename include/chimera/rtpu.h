@@ -67,7 +67,8 @@ typedef struct chm_rtpu_task {
 } chm_rtpu_task_t;
 
 /* Set the time every later call of this process waits for a reply
- * (0: the default). Any thread. */
+ * (0: the default), kept in µs (at least 1 µs, at most 71 minutes). Any
+ * thread. */
 void chm_rtpu_timeout_set(uint64_t timeout_ns);
 /* The timeout in force, ns. */
 uint64_t chm_rtpu_timeout(void);

@@ -15,7 +15,9 @@ using namespace chm::xmail;
 
 namespace {
 
-std::atomic<std::uint64_t> g_timeout{CHM_RTPU_TIMEOUT_DEFAULT_NS};
+// In µs, 32 bits: a 64-bit atomic is a libatomic call on m68k. Up to
+// UINT32_MAX µs (71 minutes); longer settings are cut to that.
+std::atomic<std::uint32_t> g_timeout_us{std::uint32_t(CHM_RTPU_TIMEOUT_DEFAULT_NS / 1000)};
 
 // Replies are small and fixed (task lists come in pages sized to fit), so
 // they go on the caller's stack: tasks of one RTPU share a thread, and so
@@ -42,10 +44,14 @@ int remote(int rtpu, Kind kind, const void* req, std::uint32_t len, char* reply,
 extern "C" {
 
 void chm_rtpu_timeout_set(uint64_t timeout_ns) {
-    g_timeout.store(timeout_ns ? timeout_ns : CHM_RTPU_TIMEOUT_DEFAULT_NS, std::memory_order_relaxed);
+    const std::uint64_t ns = timeout_ns ? timeout_ns : CHM_RTPU_TIMEOUT_DEFAULT_NS;
+    const std::uint64_t us = ns / 1000 ? ns / 1000 : 1;
+    g_timeout_us.store(us > UINT32_MAX ? UINT32_MAX : std::uint32_t(us), std::memory_order_relaxed);
 }
 
-uint64_t chm_rtpu_timeout(void) { return g_timeout.load(std::memory_order_relaxed); }
+uint64_t chm_rtpu_timeout(void) {
+    return std::uint64_t(g_timeout_us.load(std::memory_order_relaxed)) * 1000u;
+}
 
 int chm_rtpu_ping(int rtpu, chm_rtpu_info_t* info) {
     set_error("%s", "");
