@@ -33,7 +33,12 @@ int poll_for(pollfd* fds, std::size_t n, std::int64_t timeout_ns) {
         ts.tv_nsec = long(timeout_ns % 1000000000);
         limit = &ts;
     }
-    return ::ppoll(fds, nfds_t(n), limit, nullptr);
+    int r;
+    // A look (timeout 0) interrupted by the RTPU's own timer signal is
+    // taken again: ppoll never restarts, and that EINTR is not the caller's.
+    do r = ::ppoll(fds, nfds_t(n), limit, nullptr);
+    while (r < 0 && errno == EINTR && timeout_ns == 0);
+    return r;
 }
 
 // Parked tasks' descriptors first, then the bound IRQ lines'.
