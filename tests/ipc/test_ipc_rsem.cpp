@@ -7,6 +7,7 @@
 #include "chimera/rsem.h"
 #include "chimera/shm.h"
 #include "ipc/wake/wake.hpp"
+#include "../kernel/gap_ticker.hpp"
 #include "ipc_fixture.hpp"
 
 namespace chm::test {
@@ -64,32 +65,20 @@ chm_tid_t spawn_task(void (*fn)(void*), void* arg, const char* name, int prio, u
     return chm_task_spawn(&id, fn, arg, &a) == 0 ? id : CHM_TID_NONE;
 }
 
-volatile bool g_stop = false;
-volatile uint64_t g_max_gap = 0;
 volatile int g_result = -1000;
 uint64_t g_waited = 0;
-
-void ticker(void*) {
-    uint64_t last = chm_time_now();
-    while (!g_stop) {
-        const uint64_t now = chm_time_now();
-        if (now - last > g_max_gap) g_max_gap = now - last;
-        last = now;
-        chm_task_wait_period();
-    }
-}
 
 void p_waiter(void*) {
     chm_rsem_t* s = nullptr;
     if (chm_rsem_open("sem", &s) != 0) {
         g_result = -999;
     } else {
-        g_max_gap = 0;
+        GapTicker::max_gap = 0;
         const uint64_t t0 = chm_time_now();
         g_result = chm_rsem_p_timed(s, kWait);
         g_waited = chm_time_now() - t0;
     }
-    g_stop = true;
+    GapTicker::stop = true;
 }
 
 TEST_F(Rsem, AHostThreadBlockedInPIsWokenByAnotherProcess) {
@@ -115,13 +104,13 @@ TEST_F(Rsem, PParksOnlyTheTaskAndAHostVWakesIt) {
     const std::string path = path_;
     const pid_t child = spawn([path] {
         const int r = run_rtpu(path, 1, [] {
-            return spawn_task(ticker, nullptr, "ticker", 5, 2000000) != CHM_TID_NONE &&
+            return spawn_task(GapTicker::body, nullptr, "ticker", 5, 2000000) != CHM_TID_NONE &&
                    spawn_task(p_waiter, nullptr, "waiter", 1) != CHM_TID_NONE;
         });
         if (r != 0) return r;
         if (g_result != 0) return 50;
         // The 2 ms ticker kept running while the waiter was parked.
-        return g_max_gap * 3 < g_waited ? 0 : 51;
+        return GapTicker::max_gap * 3 < g_waited ? 0 : 51;
     });
     ASSERT_TRUE(until_waiting(s, 1));
     sleep_us(100000);

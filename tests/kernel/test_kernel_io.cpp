@@ -15,27 +15,13 @@
 #include <vector>
 
 #include "chimera/io.h"
+#include "gap_ticker.hpp"
 #include "kernel_fixture.hpp"
 
 namespace chm::test {
 namespace {
 
-volatile bool g_stop = false;
-volatile int g_ticks = 0;
-volatile uint64_t g_max_gap = 0;  // longest time between two ticker cycles
 int g_fd[2];
-
-// A 2 ms periodic task that counts its cycles and their largest gap.
-void ticker(void*) {
-    uint64_t last = chm_time_now();
-    while (!g_stop) {
-        const uint64_t now = chm_time_now();
-        if (now - last > g_max_gap) g_max_gap = now - last;
-        last = now;
-        g_ticks = g_ticks + 1;
-        chm_task_wait_period();
-    }
-}
 
 struct Outcome {
     ssize_t r = -2;
@@ -57,8 +43,8 @@ double thread_cpu_s() {  // the kernel thread's CPU time, read from a task
 // Runs `body` timed in a task, records the outcome, then stops the ticker.
 template <class Body>
 void measured(Body body) {
-    const int t0 = g_ticks;
-    g_max_gap = 0;
+    const int t0 = GapTicker::cycles;
+    GapTicker::max_gap = 0;
     const uint64_t a = chm_time_now();
     const double c0 = thread_cpu_s();
     errno = 0;
@@ -66,9 +52,9 @@ void measured(Body body) {
     g_out.err = errno;
     g_out.cpu_s = thread_cpu_s() - c0;
     g_out.waited = chm_time_now() - a;
-    g_out.ticks_during = g_ticks - t0;
-    g_out.max_gap = g_max_gap;
-    g_stop = true;
+    g_out.ticks_during = GapTicker::cycles - t0;
+    g_out.max_gap = GapTicker::max_gap;
+    GapTicker::stop = true;
 }
 
 // The ticker ran throughout the call: several cycles, and no gap as long
@@ -84,8 +70,7 @@ void expect_rtpu_kept_running() {
 class BlockingIo : public KernelTest {
 protected:
     void SetUp() override {
-        g_stop = false;
-        g_ticks = 0;
+        GapTicker::reset();
         g_out = Outcome{};
         ASSERT_EQ(pipe(g_fd), 0);
     }
@@ -97,7 +82,7 @@ protected:
     }
     void start_with_ticker() {
         start(CHM_SCHED_MUF, false);
-        spawn(ticker, nullptr, "ticker", 5, 2 * kMs, 50 * kUs);
+        spawn(GapTicker::body, nullptr, "ticker", 5, 2 * kMs, 50 * kUs);
     }
     // A foreign thread writes `msg` into `fd` after `delay_ms`.
     void write_later(int fd, const char* msg, int delay_ms) {
@@ -176,7 +161,7 @@ TEST_F(BlockingIo, BigWriteToAFullPipeParksBetweenPieces) {
     });
     ASSERT_EQ(chm_kernel_run(), 0);
     helper_.join();
-    EXPECT_EQ(g_out.r, ssize_t(kBig));
+    EXPECT_EQ(g_out.r, ssize_t(kBig)) << "errno " << g_out.err;
     ASSERT_EQ(got.size(), kBig);
     for (size_t i = 0; i < kBig; ++i)
         ASSERT_EQ(got[i], static_cast<unsigned char>(i * 131 + i / 251)) << "byte " << i;
@@ -250,7 +235,7 @@ chm_tid_t g_victim;
 void destroyer(void*) {
     usleep(20000);
     EXPECT_EQ(chm_task_destroy(g_victim), 0);
-    g_stop = true;
+    GapTicker::stop = true;
 }
 
 TEST_F(BlockingIo, DestroyingAParkedTaskLeavesNothingBehind) {

@@ -4,6 +4,7 @@
 #include <string>
 
 #include "chimera/program.h"
+#include "gap_ticker.hpp"
 #include "kernel_fixture.hpp"
 
 #ifndef CTLPROG_PATH
@@ -15,35 +16,20 @@ namespace {
 
 class Program : public KernelTest {};
 
-volatile int g_ticks = 0;
-volatile uint64_t g_max_gap = 0;  // longest time between two ticker cycles
-volatile bool g_program_done = false;
 uint64_t g_program_ran = 0;
 int g_program = -1;
-
-void ticker(void*) {
-    uint64_t last = chm_time_now();
-    while (!g_program_done) {
-        const uint64_t now = chm_time_now();
-        if (now - last > g_max_gap) g_max_gap = now - last;
-        last = now;
-        g_ticks = g_ticks + 1;
-        chm_task_wait_period();
-    }
-}
 
 void watcher(void*) {
     const uint64_t t0 = chm_time_now();
     int status = 0;
     while (chm_program_status(g_program, &status) == -EAGAIN) chm_task_pause_until(chm_time_now() + kMs);
     g_program_ran = chm_time_now() - t0;
-    g_program_done = true;
+    GapTicker::stop = true;
 }
 
 TEST_F(Program, MainRunsAsATaskWithItsArgumentsAndIsPreemptible) {
     start(CHM_SCHED_MUF, false);
-    g_ticks = 0;
-    g_program_done = false;
+    GapTicker::reset();
     const char* argv[] = {"ctlprog", "300", "hello"};
     chm_tid_t main_task = CHM_TID_NONE;
     g_program = chm_program_load(CTLPROG_PATH, 3, argv, nullptr, &main_task);
@@ -54,7 +40,7 @@ TEST_F(Program, MainRunsAsATaskWithItsArgumentsAndIsPreemptible) {
     int status = 0;
     EXPECT_EQ(chm_program_status(g_program, &status), -EAGAIN);
     // Higher priority than main: it only runs if main's loop is preempted.
-    spawn(ticker, nullptr, "ticker", 5, 2 * kMs, 50 * kUs);
+    spawn(GapTicker::body, nullptr, "ticker", 5, 2 * kMs, 50 * kUs);
     spawn(watcher, nullptr, "watcher", 4);
     ASSERT_EQ(chm_kernel_run(), 0);
     ASSERT_EQ(chm_program_status(g_program, &status), 0);
@@ -62,9 +48,9 @@ TEST_F(Program, MainRunsAsATaskWithItsArgumentsAndIsPreemptible) {
     // Had main's loop not been preempted, the ticker would have stood still
     // for the whole loop (one gap as long as it, then a burst of late
     // cycles).
-    EXPECT_GT(g_ticks, 5);
-    EXPECT_LT(g_max_gap * 3, g_program_ran)
-        << "the 2 ms ticker stood still " << g_max_gap << " ns of the program's " << g_program_ran
+    EXPECT_GT(GapTicker::cycles, 5);
+    EXPECT_LT(GapTicker::max_gap * 3, g_program_ran)
+        << "the 2 ms ticker stood still " << GapTicker::max_gap << " ns of the program's " << g_program_ran
         << " ns: main's code was not preemptible";
 }
 
