@@ -212,6 +212,13 @@ void registry_destroy_locked(const View& v, std::uint32_t index, std::uint32_t m
 // Clear slot's attach bit; frees a destroyed entry nobody holds.
 void registry_detach_locked(const View& v, std::uint32_t index, std::uint32_t slot,
                             std::uint32_t me);
+// This process opens entry `index` once more (registry lock held): its
+// slot's attach bit is set and the process's reference counted.
+void registry_ref_locked(Attachment& a, std::uint32_t index);
+// This process closes the entry of `kind` whose payload starts at `offset`
+// once (registry lock held); its last reference detaches the slot.
+// 0, or -EINVAL when the process holds no such entry open.
+int registry_unref_locked(Attachment& a, std::uint32_t offset, std::uint32_t kind);
 // The repair run when the registry lock was robbed from a dead holder
 // mid-change: finish or undo entries left half-changed and free
 // allocations never committed. Also run by every recovery.

@@ -206,6 +206,18 @@ void registry_destroy_locked(const View& v, std::uint32_t i, std::uint32_t me) {
     if (e->attached.load(R) == 0) final_free_locked(v, i, me);
 }
 
+void registry_ref_locked(Attachment& a, std::uint32_t index) {
+    a.entry(index)->attached.fetch_or(1u << a.slot, R);
+    ++a.local_refs[index];
+}
+
+int registry_unref_locked(Attachment& a, std::uint32_t offset, std::uint32_t kind) {
+    const int i = registry_find_offset_locked(a, offset);
+    if (i < 0 || a.entry(std::uint32_t(i))->kind.load(R) != kind || !a.local_refs[i]) return -EINVAL;
+    if (--a.local_refs[i] == 0) registry_detach_locked(a, std::uint32_t(i), a.slot, a.token);
+    return 0;
+}
+
 void registry_detach_locked(const View& v, std::uint32_t i, std::uint32_t slot, std::uint32_t me) {
     RegistryEntry* e = v.entry(i);
     e->attached.fetch_and(~(1u << slot), R);

@@ -138,9 +138,7 @@ int chm_msgq_open(const char* name, chm_msgq_t** out) {
     int i = registry_find_locked(*a, name, kKindMsgQueue);
     if (drop_stillborn_locked(a, i)) i = -ENOENT;
     if (i >= 0) {
-        RegistryEntry* e = a->entry(std::uint32_t(i));
-        e->attached.fetch_or(1u << a->slot, R);
-        ++a->local_refs[i];
+        registry_ref_locked(*a, std::uint32_t(i));
         *out = reinterpret_cast<chm_msgq_t*>(queue_of(a, std::uint32_t(i)));
     }
     registry_unlock(*a);
@@ -156,12 +154,7 @@ int chm_msgq_close(chm_msgq_t* q) {
         return set_error("chm_msgq_close: %p is not in the backplane", static_cast<void*>(q)), -EINVAL;
     int r = lock_registry(a, "chm_msgq_close");
     if (r) return r;
-    const int i = registry_find_offset_locked(*a, a->off_of(p));
-    r = -EINVAL;
-    if (i >= 0 && a->entry(std::uint32_t(i))->kind.load(R) == kKindMsgQueue && a->local_refs[i]) {
-        if (--a->local_refs[i] == 0) registry_detach_locked(*a, std::uint32_t(i), a->slot, a->token);
-        r = 0;
-    }
+    r = registry_unref_locked(*a, a->off_of(p), kKindMsgQueue);
     registry_unlock(*a);
     if (r) set_error("chm_msgq_close: %p is not a queue opened by this process", static_cast<void*>(q));
     return r;

@@ -220,10 +220,8 @@ int chm_rsem_open(const char* name, chm_rsem_t** out) {
     if (r) return r;
     const int i = registry_find_locked(*a, name, kKindRemoteSem);
     if (i >= 0) {
-        RegistryEntry* e = a->entry(std::uint32_t(i));
-        e->attached.fetch_or(1u << a->slot);
-        ++a->local_refs[i];
-        *out = reinterpret_cast<chm_rsem_t*>(a->base + e->offset.load());
+        registry_ref_locked(*a, std::uint32_t(i));
+        *out = reinterpret_cast<chm_rsem_t*>(a->base + a->entry(std::uint32_t(i))->offset.load());
     }
     registry_unlock(*a);
     if (i < 0) return set_error("chm_rsem_open: no remote semaphore \"%s\"", name), -ENOENT;
@@ -320,9 +318,9 @@ int chm_rsem_close(chm_rsem_t* h) {
     Attachment* a = current();
     int r = registry_lock(*a, a->token);
     if (r) return r;
-    const int i = registry_find_offset_locked(*a, a->off_of(s));
-    if (i >= 0 && a->local_refs[i] && --a->local_refs[i] == 0)
-        registry_detach_locked(*a, std::uint32_t(i), a->slot, a->token);
+    // A handle this process did not open (or closed already) is no error
+    // here: the semaphore lives on either way.
+    registry_unref_locked(*a, a->off_of(s), kKindRemoteSem);
     registry_unlock(*a);
     return 0;
 }

@@ -69,8 +69,7 @@ int chm_shm_attach(const char* name, void** out, size_t* size) {
     const int i = registry_find_locked(*a, name, kKindShm);
     if (i >= 0) {
         RegistryEntry* e = a->entry(std::uint32_t(i));
-        e->attached.fetch_or(1u << a->slot, std::memory_order_relaxed);
-        ++a->local_refs[i];
+        registry_ref_locked(*a, std::uint32_t(i));
         *out = a->base + e->offset.load(std::memory_order_relaxed);
         if (size) *size = e->size.load(std::memory_order_relaxed);
     }
@@ -87,12 +86,7 @@ int chm_shm_detach(void* addr) {
         return set_error("chm_shm_detach: %p is not in the backplane", addr), -EINVAL;
     int r = lock_registry(a);
     if (r) return r;
-    const int i = registry_find_offset_locked(*a, a->off_of(p));
-    r = -EINVAL;
-    if (i >= 0 && a->entry(std::uint32_t(i))->kind.load(std::memory_order_relaxed) == kKindShm && a->local_refs[i]) {
-        if (--a->local_refs[i] == 0) registry_detach_locked(*a, std::uint32_t(i), a->slot, a->token);
-        r = 0;
-    }
+    r = registry_unref_locked(*a, a->off_of(p), kKindShm);
     registry_unlock(*a);
     if (r) set_error("chm_shm_detach: %p is not a segment attached by this process", addr);
     return r;
