@@ -12,7 +12,7 @@ PKGS_CROSS = g++-m68k-linux-gnu libc6-dev-m68k-cross \
              g++-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user
 PKGS_BENCH = libbenchmark-dev rt-tests python3-matplotlib
 
-.PHONY: all deps deps-cross deps-bench build demo test test-native test-m68k \
+.PHONY: all deps deps-cross deps-bench build demo demo-multi test test-native test-m68k \
         test-aarch64 bench clean
 
 all: build
@@ -32,9 +32,15 @@ $(BUILD)/build.ninja:
 build: deps $(BUILD)/build.ninja
 	meson compile -C $(BUILD)
 
-# A live three-RTPU system on the default /dev/shm backplane, ~15 s; stops
-# and removes everything at the end or on Ctrl-C (examples/multi/demo.sh).
+# A control loop closed across two RTPUs on the default /dev/shm backplane,
+# its figures printed by a host process once a second for ~10 s; stops and
+# removes everything at the end or on Ctrl-C (examples/loop/demo.sh).
 demo: build
+	@sh examples/loop/demo.sh $(BUILD)
+
+# Three RTPUs sharing memory, a spin-lock, a remote semaphore and express
+# mail, ~15 s (examples/multi/demo.sh).
+demo-multi: build
 	@sh examples/multi/demo.sh $(BUILD)
 
 test: test-native test-m68k test-aarch64

@@ -1,0 +1,69 @@
+/* RTPU 2 of the control-loop demo: a task blocked on loop.sense wakes for
+ * each sample the sensor on RTPU 1 sends, computes the force that steers
+ * the plant to its set point (PD control) and answers on loop.reply, in
+ * the sensor's local memory. See loop.h. */
+#include <chimera/chimera.h>
+#include <chimera/bp.h>
+#include <chimera/msgq.h>
+#include <errno.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "loop.h"
+
+static chm_msgq_t *g_sense, *g_reply;
+static uint64_t g_samples, g_answers, g_unanswered;
+
+static void controller(void *arg) {
+    (void)arg;
+    for (;;) {
+        loop_sample_t s;
+        const int n = chm_msgq_receive(g_sense, &s, sizeof s, NULL);
+        if (n == -EIDRM) return; /* the queue went: the RTPU is stopping */
+        if (n != (int)sizeof s) continue;
+        const uint64_t now = chm_time_now();
+        ++g_samples;
+        const loop_reply_t r = {s.seq, s.sent_ns, now,
+                                400.0 * (loop_setpoint(s.seq) - s.position) - 40.0 * s.velocity};
+        if (!g_reply && chm_msgq_open(LOOP_REPLY, &g_reply) != 0) g_reply = NULL;
+        if (g_reply && chm_msgq_try_send(g_reply, 1, 0, &r, sizeof r) == 0)
+            ++g_answers;
+        else
+            ++g_unanswered;
+    }
+}
+
+static void on_shutdown(void *arg) {
+    (void)arg;
+    printf("controller: shutdown hook: %llu samples received, %llu answered, %llu could not be answered\n",
+           (unsigned long long)g_samples, (unsigned long long)g_answers, (unsigned long long)g_unanswered);
+    chm_msgq_destroy(LOOP_SENSE);
+}
+
+int main(int argc, char **argv) {
+    (void)argc;
+    (void)argv;
+    chm_msgq_attr_t qa;
+    chm_msgq_attr_init(&qa);
+    qa.max_msg = sizeof(loop_sample_t);
+    qa.max_count = 16;
+    int r = chm_msgq_create(LOOP_SENSE, &qa, chm_bp_self(), &g_sense);
+    if (r == -EEXIST) r = chm_msgq_open(LOOP_SENSE, &g_sense); /* this RTPU restarted */
+    if (r) {
+        printf("controller: cannot create %s: %s\n", LOOP_SENSE, chm_bp_last_error());
+        return 1;
+    }
+    chm_task_attr_t a;
+    chm_task_attr_init(&a);
+    a.name = "controller";
+    a.priority = 10;
+    a.critical = 1;
+    chm_tid_t tid;
+    if ((r = chm_task_spawn(&tid, controller, NULL, &a)) != 0) {
+        printf("controller: cannot spawn: %s\n", strerror(-r));
+        return 1;
+    }
+    chm_kernel_on_shutdown(on_shutdown, NULL);
+    printf("controller: answering %s on RTPU %d (task %d)\n", LOOP_SENSE, chm_bp_self(), (int)tid);
+    return 0;
+}

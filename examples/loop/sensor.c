@@ -1,0 +1,129 @@
+/* RTPU 1 of the control-loop demo: a critical 1 kHz task that closes a
+ * loop through another RTPU. Each cycle it samples a simulated unit mass,
+ * sends the timestamped sample to the controller on RTPU 2 (loop.sense),
+ * waits for the force it answers (loop.reply, at most 0.6 ms), applies it
+ * and reports the cycle's figures to the host (loop.stats). See loop.h. */
+#include <chimera/chimera.h>
+#include <chimera/bp.h>
+#include <chimera/msgq.h>
+#include <errno.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "loop.h"
+
+static chm_msgq_t *g_reply, *g_stats, *g_sense;
+static uint64_t g_sent, g_answered, g_lost, g_unsent, g_stats_dropped;
+
+/* A late cycle runs on: the miss is counted in the task's status and
+ * reported through loop.stats, not printed 1000 times a second. */
+static enum chm_deadline_action on_miss(const chm_deadline_info_t *info, void *arg) {
+    (void)info;
+    (void)arg;
+    return CHM_DL_CONTINUE;
+}
+
+/* Wait for the answer to `seq` until `until_ns`; older answers (to a
+ * sample whose wait already ran out) are dropped. 1: *out holds it. */
+static int await_reply(uint64_t seq, uint64_t until_ns, loop_reply_t *out) {
+    for (;;) {
+        const uint64_t now = chm_time_now();
+        if (now >= until_ns) return 0;
+        const int n = chm_msgq_receive_timed(g_reply, out, sizeof *out, NULL, (int64_t)(until_ns - now));
+        if (n == (int)sizeof *out && out->seq == seq) return 1;
+        if (n < 0 && n != -EINTR) return 0;
+    }
+}
+
+static void sensor(void *arg) {
+    (void)arg;
+    const chm_tid_t self = chm_task_self();
+    const double dt = LOOP_PERIOD_NS / 1e9;
+    double pos = 0.0, vel = 0.0;
+    for (uint64_t seq = 1;; ++seq) {
+        const uint64_t release = chm_task_cycle_release();
+        const uint64_t t0 = chm_time_now();
+        loop_stat_t st = {.seq = seq, .release_late_ns = (uint32_t)(t0 - release)};
+        /* The controller creates loop.sense; until it has, the sample waits. */
+        if (!g_sense && chm_msgq_open(LOOP_SENSE, &g_sense) != 0) g_sense = NULL;
+        const loop_sample_t s = {seq, t0, (float)pos, (float)vel};
+        double force = 0.0;
+        if (g_sense && chm_msgq_try_send(g_sense, 1, 0, &s, sizeof s) == 0) {
+            ++g_sent;
+            loop_reply_t r;
+            if (await_reply(seq, t0 + LOOP_REPLY_WAIT_NS, &r)) {
+                ++g_answered;
+                force = r.force;
+                st.one_way_ns = (uint32_t)(r.received_ns - t0);
+                st.round_trip_ns = (uint32_t)(chm_time_now() - t0);
+            } else {
+                ++g_lost;
+            }
+        } else {
+            ++g_unsent;
+        }
+        vel += force * dt; /* the plant: a unit mass pushed by the force */
+        pos += vel * dt;
+        chm_task_status_t ts;
+        st.misses = chm_task_status(self, &ts) == 0 ? (uint32_t)ts.misses : 0;
+        st.lost = (uint32_t)g_lost;
+        st.unsent = (uint32_t)g_unsent;
+        st.position = (float)pos;
+        st.setpoint = loop_setpoint(seq);
+        /* No monitor reading: the record is dropped, the loop goes on. */
+        if (chm_msgq_try_send(g_stats, 0, 0, &st, sizeof st) != 0) ++g_stats_dropped;
+        chm_task_wait_period();
+    }
+}
+
+static void on_shutdown(void *arg) {
+    (void)arg;
+    chm_tid_t me;
+    chm_task_status_t ts;
+    if (chm_task_find("sensor", &me) == 0 && chm_task_status(me, &ts) == 0)
+        printf("sensor: shutdown hook: %llu cycles, %llu samples sent, %llu answered, %llu answers lost, "
+               "%llu not sent, %llu deadline misses, %llu stats records dropped\n",
+               (unsigned long long)ts.cycles, (unsigned long long)g_sent, (unsigned long long)g_answered,
+               (unsigned long long)g_lost, (unsigned long long)g_unsent, (unsigned long long)ts.misses,
+               (unsigned long long)g_stats_dropped);
+    chm_msgq_destroy(LOOP_REPLY);
+    chm_msgq_destroy(LOOP_STATS);
+}
+
+/* Create the queue `name`, or open it when an earlier run of this RTPU
+ * (restarted after a crash) left it. */
+static int queue(const char *name, uint32_t msg, uint32_t count, int where, chm_msgq_t **out) {
+    chm_msgq_attr_t a;
+    chm_msgq_attr_init(&a);
+    a.max_msg = msg;
+    a.max_count = count;
+    int r = chm_msgq_create(name, &a, where, out);
+    if (r == -EEXIST) r = chm_msgq_open(name, out);
+    if (r) printf("sensor: cannot create %s: %s\n", name, chm_bp_last_error());
+    return r;
+}
+
+int main(int argc, char **argv) {
+    (void)argc;
+    (void)argv;
+    if (queue(LOOP_REPLY, sizeof(loop_reply_t), 16, chm_bp_self(), &g_reply) ||
+        queue(LOOP_STATS, sizeof(loop_stat_t), LOOP_STATS_CAPACITY, CHM_MSGQ_COMMON, &g_stats))
+        return 1;
+    chm_task_attr_t a;
+    chm_task_attr_init(&a);
+    a.name = "sensor";
+    a.period_ns = LOOP_PERIOD_NS;
+    a.wcet_ns = LOOP_PERIOD_NS * 7 / 10;
+    a.critical = 1;
+    a.on_deadline = on_miss;
+    chm_tid_t tid;
+    const int r = chm_task_spawn(&tid, sensor, NULL, &a);
+    if (r) {
+        printf("sensor: cannot spawn the loop: %s\n", strerror(-r));
+        return 1;
+    }
+    chm_kernel_on_shutdown(on_shutdown, NULL);
+    printf("sensor: 1 kHz loop on RTPU %d (task %d): samples to %s, answers on %s, figures on %s\n",
+           chm_bp_self(), (int)tid, LOOP_SENSE, LOOP_REPLY, LOOP_STATS);
+    return 0;
+}
