@@ -9,6 +9,9 @@
 # for DEMO_SECONDS (default 10); then `chimera stop` (shutdown hooks print
 # their counts) and `chimera rm`. Ctrl-C stops and cleans up too: no
 # process and no file is left behind. Exit status 0 when the loop ran.
+# The RTPUs run at SCHED_FIFO 50 where the host allows it (root, or an
+# rtprio limit); DEMO_RTPU_OPTIONS replaces that choice (e.g. "--pin
+# --idle-poll 300", or "" for none; see chimera --help).
 #
 # usage: demo.sh [BUILD_DIR]   (default: build)
 set -u
@@ -23,9 +26,18 @@ BP=${CHIMERA_BACKPLANE:-/dev/shm/chimera-$(id -un).bp}
 RTPUS=2
 demo_begin
 
-echo "== chimera start: 2 RTPUs on $BP"
+if [ -n "${DEMO_RTPU_OPTIONS+set}" ]; then
+    options=$DEMO_RTPU_OPTIONS
+elif chrt -f 50 true 2>/dev/null; then
+    options="--rt-priority 50"
+else
+    options=""
+    echo "(SCHED_FIFO is not allowed here: the RTPUs run as ordinary processes)"
+fi
+echo "== chimera start --rtpus 2 $options: on $BP"
 demo_started=1
-"$CHIMERA" start --rtpus 2 --program "1:$LOOP/sensor.so" --program "2:$LOOP/controller.so" || exit 1
+# shellcheck disable=SC2086 # the options are words
+"$CHIMERA" start --rtpus 2 $options --program "1:$LOOP/sensor.so" --program "2:$LOOP/controller.so" || exit 1
 sleep 0.5
 demo_logs
 echo

@@ -1,6 +1,9 @@
 // The chimera command (start / status / stop / rm) and chimera-rtpu's
 // command line, run as real processes; bad input gives one clear line and
 // a non-zero exit, and leaves nothing behind.
+#include <sched.h>
+#include <sys/mman.h>
+
 #include "rtpu_fixture.hpp"
 
 using namespace chm::test;
@@ -99,6 +102,9 @@ TEST_F(RtpuTest, ChimeraBadInputGivesOneClearLine) {
         {{"start", "--program", "1:/no/such.so"}, true, 1, "/no/such.so: No such file"},
         {{"start", "--rtpus", "1", "--program", std::string("2:") + PROBE_SO}, true, 2, "only 1 RTPUs"},
         {{"start", "--policy", "fifo"}, true, 2, "unknown policy \"fifo\""},
+        {{"start", "--rt-priority", "100"}, true, 2, "--rt-priority wants a SCHED_FIFO priority 1..99, not \"100\""},
+        {{"start", "--idle-poll", "x"}, true, 2, "--idle-poll wants microseconds 0..100000, not \"x\""},
+        {{"stop", "--pin"}, true, 2, "chimera stop: unknown option --pin"},
         {{"start", "--timeout", "-1"}, true, 2, "--timeout wants seconds"},
         {{"start", "--rtpus", "1", "--program", "1:" + notso}, true, 1, "cannot load"},
         {{"status", "--bogus"}, true, 2, "unknown option --bogus"},
@@ -141,6 +147,10 @@ TEST_F(RtpuTest, ChimeraRtpuBadInputGivesOneClearLine) {
         {{"--rtpu"}, 2, "option --rtpu needs a value"},
         {{"--rtpu", "1", "--policy", "fifo"}, 2, "unknown policy \"fifo\""},
         {{"--rtpu", "1", "--frob"}, 2, "unknown option --frob"},
+        {{"--rtpu", "1", "--rt-priority", "0"}, 2, "--rt-priority wants a SCHED_FIFO priority 1..99, not \"0\""},
+        {{"--rtpu", "1", "--cpu", "-1"}, 2, "--cpu wants a CPU number, not \"-1\""},
+        {{"--rtpu", "1", "--cpu", "1000"}, 2, "--cpu 1000: this process may not run on that CPU"},
+        {{"--rtpu", "1", "--idle-poll", "100001"}, 2, "--idle-poll wants microseconds 0..100000"},
         {{"--rtpu", "1", "--backplane", missing}, 1, "No such file"},
         {{"--rtpu", "1", "--backplane", notso}, 1, "cannot join as RTPU 1"},
         {{"--rtpu", "9", "--backplane", bp_}, 1, "out of range"},
@@ -191,4 +201,68 @@ TEST_F(RtpuTest, ChimeraOnABackplaneWithoutExpressMail) {
     EXPECT_TRUE(contains(r.out, "RTPU 1 (pid")) << r.out;
     EXPECT_FALSE(contains(r.out, "killed")) << r.out;
     EXPECT_EQ(chimera({"rm"}).status, 0);
+}
+
+// Whether this process may ask for SCHED_FIFO and lock its memory (root, or
+// CAP_SYS_NICE / CAP_IPC_LOCK, or rlimits that allow it): tried in a child.
+static bool host_grants_realtime() {
+    const pid_t p = fork();
+    if (p == 0) {
+        sched_param sp{};
+        sp.sched_priority = 1;
+        _exit(sched_setscheduler(0, SCHED_FIFO, &sp) == 0 && mlockall(MCL_CURRENT) == 0 ? 0 : 1);
+    }
+    int st = 0;
+    return p > 0 && waitpid(p, &st, 0) == p && WIFEXITED(st) && WEXITSTATUS(st) == 0;
+}
+
+// Field `n` (1-based) of /proc/PID/stat, counted after the command name.
+static long proc_stat_field(pid_t pid, int n) {
+    const std::string s = read_file("/proc/" + std::to_string(pid) + "/stat");
+    const std::size_t close = s.rfind(')');
+    if (close == std::string::npos) return -1;
+    std::istringstream in(s.substr(close + 2));
+    std::string f;
+    for (int i = 3; i <= n && in >> f; ++i) {
+    }
+    return std::strtol(f.c_str(), nullptr, 10);
+}
+
+// chimera start --rt-priority --pin --lock-memory --idle-poll: every RTPU
+// runs SCHED_FIFO at that priority, alone on its CPU (RTPU n on the n-th
+// allowed), with its memory locked, and its log says so.
+TEST_F(RtpuTest, ChimeraStartAsksTheHostForRealTime) {
+    if (!host_grants_realtime()) GTEST_SKIP() << "this process may not use SCHED_FIFO or mlockall here";
+    Outcome r = chimera({"start", "--rtpus", "2", "--rt-priority", "7", "--pin", "--lock-memory", "--idle-poll", "50"});
+    ASSERT_EQ(r.status, 0) << r.out << r.err;
+    ASSERT_EQ(chm_bp_attach_host(bp_.c_str(), "test", nullptr), 0);
+    chm_bp_status_t st;
+    ASSERT_EQ(chm_bp_status(&st), 0);
+    cpu_set_t allowed;
+    ASSERT_EQ(sched_getaffinity(0, sizeof allowed, &allowed), 0);
+    std::vector<int> cpus;
+    for (int c = 0; c < CPU_SETSIZE; ++c)
+        if (CPU_ISSET(c, &allowed)) cpus.push_back(c);
+    for (int n = 1; n <= 2; ++n) {
+        const pid_t pid = st.slot[n].pid;
+        ASSERT_GT(pid, 0);
+        EXPECT_EQ(proc_stat_field(pid, 41), SCHED_FIFO) << "RTPU " << n;
+        EXPECT_EQ(proc_stat_field(pid, 40), 7) << "RTPU " << n;
+        cpu_set_t on;
+        ASSERT_EQ(sched_getaffinity(pid, sizeof on, &on), 0);
+        EXPECT_EQ(CPU_COUNT(&on), 1) << "RTPU " << n;
+        EXPECT_TRUE(CPU_ISSET(cpus[std::size_t(n - 1) % cpus.size()], &on)) << "RTPU " << n;
+        const std::string status = read_file("/proc/" + std::to_string(pid) + "/status");
+        const std::size_t lck = status.find("VmLck:");
+        ASSERT_NE(lck, std::string::npos);
+        EXPECT_GT(std::strtol(status.c_str() + lck + 6, nullptr, 10), 0) << "RTPU " << n << " locked no memory";
+        const std::string log = read_file(bp_ + ".rtpu" + std::to_string(n) + ".log");
+        EXPECT_TRUE(contains(log, "SCHED_FIFO 7, CPU " + std::to_string(cpus[std::size_t(n - 1) % cpus.size()]) +
+                                      ", memory locked, idle poll 50 us"))
+            << log;
+    }
+    chm_bp_leave();
+    r = chimera({"stop"});
+    EXPECT_EQ(r.status, 0) << r.err;
+    EXPECT_FALSE(contains(r.out, "killed")) << r.out;
 }

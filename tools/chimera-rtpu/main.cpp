@@ -11,6 +11,7 @@
 #include <cerrno>
 #include <csignal>
 #include <cstdio>
+#include <cstdint>
 #include <cstdlib>
 #include <cstring>
 #include <string>
@@ -27,6 +28,7 @@
 #include "ipc/wake/wake.hpp"
 #include "ipc/xmail/xmail.hpp"
 #include "port.hpp"
+#include "realtime.hpp"
 
 namespace {
 
@@ -37,7 +39,8 @@ constexpr int kShutdownPriority = 10000;
 void usage(FILE* f) {
     std::fprintf(f,
         "usage: chimera-rtpu [--backplane PATH] --rtpu N [--name NAME]\n"
-        "                    [--policy muf|rm|edf|mlf|fixed] [--]\n"
+        "                    [--policy muf|rm|edf|mlf|fixed] [--idle-poll US]\n"
+        "                    [--rt-priority P] [--cpu K] [--lock-memory] [--]\n"
         "                    [PROGRAM.so [ARG...] [-- PROGRAM.so [ARG...]]...]\n"
         "\n"
         "Joins the backplane PATH (default $%s, else /dev/shm/chimera-$USER.bp) as\n"
@@ -46,7 +49,17 @@ void usage(FILE* f) {
         "a task with argv[0] = the program's path. Programs are separated by '--'.\n"
         "Runs until SIGTERM, SIGINT or SIGHUP (shutdown hooks run, the RTPU leaves\n"
         "the backplane, exit 0) or an express-mail stop request (exit with its code).\n"
-        "Exit 2: bad arguments; 1: cannot join, initialise or load a program.\n",
+        "\n"
+        "--idle-poll US    with nothing to run, poll the mailbox US microseconds\n"
+        "                  before sleeping (0..100000, default 0): a wake-up from a\n"
+        "                  busy peer then costs no system call\n"
+        "--rt-priority P   run the process at SCHED_FIFO priority P (needs\n"
+        "                  CAP_SYS_NICE or an rtprio limit)\n"
+        "--cpu K           run only on CPU K\n"
+        "--lock-memory     mlockall: no page fault in a control loop\n"
+        "\n"
+        "Exit 2: bad arguments; 1: cannot join, initialise or load a program, or\n"
+        "the OS refused --rt-priority, --cpu or --lock-memory.\n",
         CHM_BP_ENV);
 }
 
@@ -60,6 +73,8 @@ struct Options {
     int rtpu = -1;
     const char* name = nullptr;
     chm_sched_policy policy = CHM_SCHED_MUF;
+    int idle_poll_us = 0;
+    chimera_rtpu::HostRealtime realtime;
     std::vector<Program> programs;
 };
 
@@ -109,6 +124,18 @@ Options parse(int argc, char** argv) {
             for (const auto& p : kPol)
                 if (!std::strcmp(v, p.n)) o.policy = p.p, found = true;
             if (!found) bad("unknown policy \"%s\" (muf, rm, edf, mlf or fixed)", v);
+        } else if (!std::strcmp(a, "--idle-poll")) {
+            const char* v = value(a);
+            if (!parse_int(v, &o.idle_poll_us) || o.idle_poll_us > 100000)
+                bad("--idle-poll wants microseconds 0..100000, not \"%s\"", v);
+        } else if (!std::strcmp(a, "--rt-priority")) {
+            const std::string why = chimera_rtpu::parse_fifo_priority(value(a), &o.realtime.fifo_priority);
+            if (!why.empty()) bad("%s", why.c_str());
+        } else if (!std::strcmp(a, "--cpu")) {
+            const std::string why = chimera_rtpu::parse_cpu(value(a), &o.realtime.cpu);
+            if (!why.empty()) bad("%s", why.c_str());
+        } else if (!std::strcmp(a, "--lock-memory")) {
+            o.realtime.lock_memory = true;
         } else if (!std::strcmp(a, "--")) {
             ++i;
             break;
@@ -227,6 +254,10 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "chimera-rtpu: default backplane path too long\n");
         return 1;
     }
+    if (const std::string why = chimera_rtpu::apply(o.realtime); !why.empty()) {
+        std::fprintf(stderr, "chimera-rtpu: RTPU %d: %s\n", o.rtpu, why.c_str());
+        return 1;
+    }
     if (int r = chm_bp_join(path, o.rtpu, o.name)) {
         const char* why = chm_bp_last_error();
         if (std::strstr(why, std::strerror(-r)))
@@ -239,6 +270,7 @@ int main(int argc, char** argv) {
     chm_kernel_config_init(&cfg);
     cfg.policy = o.policy;
     cfg.rtpu_id = o.rtpu;
+    cfg.idle_poll_ns = std::uint64_t(o.idle_poll_us) * 1000u;
     auto fail = [&](const char* what, int r) {
         std::fprintf(stderr, "chimera-rtpu: RTPU %d: %s: %s\n", o.rtpu, what, std::strerror(-r));
         chm::xmail::server_stop();
@@ -276,8 +308,13 @@ int main(int argc, char** argv) {
             return 1;
         }
     }
-    std::printf("chimera-rtpu: RTPU %d joined %s (pid %d, %s, %zu program%s)\n", o.rtpu, path, int(::getpid()),
-                policy_name(o.policy), o.programs.size(), o.programs.size() == 1 ? "" : "s");
+    std::string host;  // what was asked of the host OS, for the log
+    if (o.realtime.fifo_priority) host += ", SCHED_FIFO " + std::to_string(o.realtime.fifo_priority);
+    if (o.realtime.cpu >= 0) host += ", CPU " + std::to_string(o.realtime.cpu);
+    if (o.realtime.lock_memory) host += ", memory locked";
+    if (o.idle_poll_us) host += ", idle poll " + std::to_string(o.idle_poll_us) + " us";
+    std::printf("chimera-rtpu: RTPU %d joined %s (pid %d, %s%s, %zu program%s)\n", o.rtpu, path, int(::getpid()),
+                policy_name(o.policy), host.c_str(), o.programs.size(), o.programs.size() == 1 ? "" : "s");
     std::fflush(stdout);
 
     const int code = chm_kernel_run();

@@ -2,7 +2,8 @@
 // backplane (docs/architecture.md, "RTPU processes and express mail").
 //
 //   chimera start  [--backplane PATH] [--rtpus N] [--program RTPU:PATH[:ARG...]]...
-//                  [--policy P] [--log-terminal] [--timeout S]
+//                  [--policy P] [--rt-priority P] [--pin] [--lock-memory]
+//                  [--idle-poll US] [--log-terminal] [--timeout S]
 //   chimera status [--backplane PATH]
 //   chimera stop   [--backplane PATH] [--timeout S]
 //   chimera rm     [--backplane PATH] [--force]
@@ -22,6 +23,7 @@
 #include <vector>
 
 #include <fcntl.h>
+#include <sched.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -37,7 +39,8 @@ namespace {
 void usage(FILE* f) {
     std::fprintf(f,
         "usage: chimera start  [--backplane PATH] [--rtpus N] [--program RTPU:PATH[:ARG...]]...\n"
-        "                      [--policy muf|rm|edf|mlf|fixed] [--log-terminal] [--timeout S]\n"
+        "                      [--policy muf|rm|edf|mlf|fixed] [--rt-priority P] [--pin]\n"
+        "                      [--lock-memory] [--idle-poll US] [--log-terminal] [--timeout S]\n"
         "       chimera status [--backplane PATH]\n"
         "       chimera stop   [--backplane PATH] [--timeout S]\n"
         "       chimera rm     [--backplane PATH] [--force]\n"
@@ -47,6 +50,9 @@ void usage(FILE* f) {
         "        chimera-rtpu processes, each with the programs given for it; their\n"
         "        output goes to PATH.rtpuN.log (or this terminal with --log-terminal).\n"
         "        Waits up to S seconds (default 10) until every RTPU runs and answers.\n"
+        "        --rt-priority, --lock-memory and --idle-poll go to every RTPU (see\n"
+        "        chimera-rtpu --help); --pin runs RTPU n on the n-th allowed CPU\n"
+        "        (round robin).\n"
         "status  the RTPU table and each running RTPU's tasks (through express mail)\n"
         "stop    SIGTERM every RTPU, wait up to S seconds (default 5), SIGKILL the rest\n"
         "rm      remove the backplane file and its RTPU logs; refuses while processes\n"
@@ -62,6 +68,8 @@ void usage(FILE* f) {
 struct StartPlan {
     int rtpus = 2;
     std::string policy;
+    std::vector<std::string> rtpu_options;  // given to every chimera-rtpu
+    bool pin = false;
     bool log_terminal = false;
     std::vector<std::vector<std::string>> programs;  // per RTPU: chimera-rtpu's program arguments
 };
@@ -136,9 +144,22 @@ std::string last_line(const std::string& path) {
     return last;
 }
 
+// The n-th CPU (0-based, round robin) this process may run on.
+int nth_allowed_cpu(int n) {
+    cpu_set_t allowed;
+    CPU_ZERO(&allowed);
+    if (sched_getaffinity(0, sizeof allowed, &allowed) != 0 || CPU_COUNT(&allowed) == 0) return n;
+    n %= CPU_COUNT(&allowed);
+    for (int c = 0; c < CPU_SETSIZE; ++c)
+        if (CPU_ISSET(c, &allowed) && n-- == 0) return c;
+    return 0;
+}
+
 pid_t launch(const Options& o, const StartPlan& p, int n, const std::string& bin) {
     std::vector<std::string> args = {bin, "--backplane", o.backplane, "--rtpu", std::to_string(n)};
     if (!p.policy.empty()) args.insert(args.end(), {"--policy", p.policy});
+    args.insert(args.end(), p.rtpu_options.begin(), p.rtpu_options.end());
+    if (p.pin) args.insert(args.end(), {"--cpu", std::to_string(nth_allowed_cpu(n - 1))});
     if (std::size_t(n) <= p.programs.size() && !p.programs[std::size_t(n) - 1].empty()) {
         args.push_back("--");
         for (const std::string& a : p.programs[std::size_t(n) - 1]) args.push_back(a);
@@ -320,6 +341,17 @@ int main(int argc, char** argv) {
             if (plan.policy != "muf" && plan.policy != "rm" && plan.policy != "edf" && plan.policy != "mlf" &&
                 plan.policy != "fixed")
                 bad("unknown policy \"" + plan.policy + "\" (muf, rm, edf, mlf or fixed)");
+        } else if ((a == "--rt-priority" || a == "--idle-poll") && starting) {
+            const char* v = value();
+            long n = 0;
+            if (a == "--rt-priority" ? !parse_num(v, 1, 99, &n) : !parse_num(v, 0, 100000, &n))
+                bad(a + (a == "--rt-priority" ? " wants a SCHED_FIFO priority 1..99" : " wants microseconds 0..100000") +
+                    ", not \"" + v + "\"");
+            plan.rtpu_options.insert(plan.rtpu_options.end(), {a, v});
+        } else if (a == "--lock-memory" && starting) {
+            plan.rtpu_options.push_back(a);
+        } else if (a == "--pin" && starting) {
+            plan.pin = true;
         } else if (a == "--log-terminal" && starting) {
             plan.log_terminal = true;
         } else if (a == "--force" && cmd == "rm") {
