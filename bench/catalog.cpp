@@ -90,6 +90,12 @@ constexpr RowInfo kRows[] = {
      "remote semaphore hand-off to a sleeping RTPU, RT/2"},
     {"rsem_handoff_polling", "ns", "peer_cacheline_pingpong_xcore", kNull, ratio_le(3),
      "remote semaphore hand-off to a polling RTPU, RT/2"},
+    // ---- scaling (issue 6 item 5): the curves are in scaling_rtpus.png and
+    // scaling_msg_size.png; one figure of each is a row
+    {"msgq_putget_64k_xrtpu", "ns", "peer_bipc_mq_64k_one_thread", kNull, none,
+     "cross-RTPU 64 KiB put+get, no wait (the largest size of the message-size scaling)"},
+    {"rsem_handoff_8rtpus_over_2", "x", nullptr, kNull, none,
+     "cross-RTPU remote semaphore hand-off with 8 RTPUs running over its cost with 2"},
     {"idle_rtpu_cpu", "%", nullptr, kNull, {Target::kValueBelow, 1}, "CPU used by an idle RTPU"},
     // ---- predictability (issue 6 item 4)
     {"release_lateness_p99_1task", "ns", "peer_sigwait_1khz_lateness_p99", kNull, none,
@@ -169,6 +175,8 @@ constexpr RowInfo kRows[] = {
      "POSIX mq 24-byte mq_send + mq_receive in one thread"},
     {"peer_bipc_mq_24b_one_thread", "ns", nullptr, kNull, none,
      "Boost.Interprocess message_queue 24-byte send + receive in one thread"},
+    {"peer_bipc_mq_64k_one_thread", "ns", nullptr, kNull, none,
+     "Boost.Interprocess message_queue 64 KiB send + receive in one thread"},
     {"peer_bipc_mq_send_24b", "ns", nullptr, kNull, none,
      "Boost.Interprocess message_queue 24-byte send alone (queue not full)"},
     {"peer_bipc_mq_receive_24b", "ns", nullptr, kNull, none,

@@ -196,14 +196,59 @@ def experiment_markdown(exps):
         ns = sc["tasks"]
         out.extend(["## Cost against the number of tasks", "",
                     "Median ns per operation with N ready tasks that never run (see "
-                    "`bench/kernel/scaling.cpp`). RTPU-count and message-size scaling come "
-                    "with the backplane.", "",
+                    "`bench/kernel/scaling.cpp`).", "",
                     "| operation | " + " | ".join(f"N = {n}" for n in ns) + " |",
                     "| --- |" + " ---: |" * len(ns)])
         for op, d in sc["ops"].items():
             out.append(f"| `{op}` | " + " | ".join(human(v, "ns") for v in d["median"]) + " |")
         out.append("")
+    sr = exps.get("scaling_rtpus")
+    if sr:
+        ns = [int(n) for n in sr["rtpus"]]
+        out.extend(["## Cost against the number of RTPUs", "",
+                    "Median ns per operation with N RTPUs running (see `bench/ipc/scaling_rtpus.cpp`): "
+                    "`rsem_handoff_rt2` is a remote semaphore hand-off (RT/2) between a task on RTPU 1 "
+                    "and one on RTPU 2 on the other core while RTPUs 3..N run idle (N = 1: both tasks "
+                    "on RTPU 1); `msgq_fan_in` is the time per message one receiver on RTPU 1 takes "
+                    "from N-1 sender RTPUs blocked on a full queue (N = 1: a sender task on RTPU 1). "
+                    "On a 2-core machine more than two busy RTPUs share the cores. "
+                    f"{sr.get('config', '')}.", "",
+                    "| operation | " + " | ".join(f"N = {n}" for n in ns) + " |",
+                    "| --- |" + " ---: |" * len(ns)])
+        for op, d in sr["ops"].items():
+            out.append(f"| `{op}` | " + " | ".join(human(v, "ns") for v in d["median"]) + " |")
+        out.append("")
+    sm = exps.get("scaling_msg_size")
+    if sm:
+        sizes = [int(b) for b in sm["bytes"]]
+        out.extend(["## Cost against the message size", "",
+                    "Median ns per put+get with nobody waiting, by message size (see "
+                    "`bench/ipc/scaling_msg_size.cpp`): Chimera's queue in another RTPU's window, "
+                    "Boost.Interprocess `message_queue` and POSIX mq in one thread, and two `memcpy` "
+                    "of the size for scale (the copy in and out every queue makes). "
+                    f"{sm.get('config', '')}"
+                    + (f"; {sm['posix_mq_note']}" if sm.get("posix_mq_note") else "") + ".", "",
+                    "| queue | " + " | ".join(size_label(b) for b in sizes) + " |",
+                    "| --- |" + " ---: |" * len(sizes)])
+        for name, d in sm["series"].items():
+            out.append(f"| `{name}` | " + " | ".join(human(v, "ns") for v in d["median"]) + " |")
+        out.append("")
     return out
+
+
+def size_label(b):
+    return f"{b // 1024} KiB" if b >= 1024 else f"{b} B"
+
+
+def curve(ax, xs, d, label, fmt="o-"):
+    """One median curve with min–max error bars; None points are left out."""
+    pts = [(x, m, lo, hi) for x, m, lo, hi in zip(xs, d["median"], d["min"], d["max"])
+           if m is not None]
+    if not pts:
+        return
+    x, med, lo, hi = zip(*pts)
+    err = [[max(0.0, a - b) for a, b in zip(med, lo)], [max(0.0, b - a) for a, b in zip(med, hi)]]
+    ax.errorbar(x, med, yerr=err, fmt=fmt, capsize=3, label=label, markersize=4)
 
 
 def plots(rows, samples_dir, outdir, exps=None):
@@ -322,6 +367,51 @@ def plots(rows, samples_dir, outdir, exps=None):
         plt.close(fig)
         made.append(("scaling_tasks.png", "Cost of scheduler operations, yield and spawn "
                      "against the number of tasks (10 to 10,000)"))
+    sr = exps.get("scaling_rtpus")
+    if sr:
+        ns = sr["rtpus"]
+        fig, ax = plt.subplots(figsize=(8, 4.5))
+        labels = {"rsem_handoff_rt2": "remote semaphore hand-off RTPU 1 <-> 2, RT/2 (others idle)",
+                  "msgq_fan_in": "one queue, N-1 sender RTPUs: time per message received"}
+        for op, d in sr["ops"].items():
+            curve(ax, ns, d, labels.get(op, op))
+        ax.set_yscale("log")
+        ax.set_xticks(ns)
+        ax.set_xlabel("RTPUs running (processes, each a kernel)")
+        ax.set_ylabel("ns per operation (median, min–max)")
+        ax.set_title("Backplane cost against the number of RTPUs")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(outdir / "scaling_rtpus.png", dpi=110)
+        plt.close(fig)
+        made.append(("scaling_rtpus.png", "Remote semaphore hand-off between two RTPUs and one "
+                     "queue's fan-in against the number of RTPUs running (1 to 8)"))
+    sm = exps.get("scaling_msg_size")
+    if sm:
+        xs = sm["bytes"]
+        fig, ax = plt.subplots(figsize=(8, 4.5))
+        labels = {"chimera_msgq_xrtpu": "Chimera msgq, queue in another RTPU's window",
+                  "boost_message_queue": "Boost.Interprocess message_queue",
+                  "posix_mq": "POSIX mq (where msgsize_max allows)",
+                  "memcpy_x2": "two memcpy of the size (for scale)"}
+        fmts = {"memcpy_x2": "s--"}
+        for name, d in sm["series"].items():
+            curve(ax, xs, d, labels.get(name, name), fmts.get(name, "o-"))
+        ax.set_xscale("log", base=2)
+        ax.set_yscale("log")
+        ax.set_xticks(xs)
+        ax.set_xticklabels([size_label(int(b)) for b in xs])
+        ax.set_xlabel("message size")
+        ax.set_ylabel("ns per put+get (median, min–max)")
+        ax.set_title("Message put+get with nobody waiting, against the size")
+        ax.grid(alpha=0.3, which="both")
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(outdir / "scaling_msg_size.png", dpi=110)
+        plt.close(fig)
+        made.append(("scaling_msg_size.png", "Put+get with nobody waiting against the message "
+                     "size (24 B to 64 KiB), Chimera beside Boost message_queue and POSIX mq"))
     return made
 
 

@@ -1,0 +1,236 @@
+// Remote semaphore rows that block and wake, between tasks of real RTPUs
+// (processes joined to a private backplane, each running a kernel whose
+// doorbell is bound to its table entry):
+//  * remote_semp_block: on one RTPU, a priority-10 task's chm_rsem_p blocks
+//    (waiter record, park on the grant word) and the priority-1 task runs:
+//    from the last instruction before the P to the first one of the task
+//    that runs next, read with the inline cycle counter (as local_p_block);
+//  * remote_semv_wake_local: chm_rsem_v by a priority-10 task waking a
+//    priority-5 task of the same RTPU (made ready, no switch), around the
+//    call (as local_v_wake);
+//  * remote_semv_wake_remote: a task on RTPU 1 (this process, cpu A) Vs a
+//    semaphore a task on RTPU 2 (a forked process, cpu B) waits on; that
+//    one Vs another back: RT/2 of the ping-pong, both RTPUs sleeping when
+//    idle (idle_poll_ns 0), beside the raw shared futex ping-pong across
+//    cores;
+//  * rsem_handoff_polling: the same ping-pong with idle_poll_ns on both
+//    RTPUs: an idle RTPU polls its doorbell before sleeping, so a V costs
+//    no system call on either side; beside the cache-line ping-pong floor.
+#include <cstdint>
+#include <string>
+
+#include "../harness.hpp"
+#include "../kernel/kbench.hpp"  // kb::ticks, kb::tick_clock
+#include "chimera/bp.h"
+#include "chimera/rsem.h"
+#include "chimera/shm.h"
+#include "rtpu.hpp"
+
+namespace chm::bench {
+namespace {
+
+using kb::ticks;
+
+constexpr std::uint64_t kPollNs = 100'000;  // rsem_handoff_polling: poll 100 us before sleeping
+
+chm_rsem_t* make_sem(const char* name) {
+    chm_rsem_t* s = nullptr;
+    if (const int r = chm_rsem_create(name, CHM_SEM_COUNTING, 0, CHM_SHM_COMMON, &s))
+        ipcb::fail_bp(std::string("chm_rsem_create ") + name, r);
+    return s;
+}
+
+void check_rsem(int r, const char* what) {
+    if (r != 0) ipcb::fail_bp(what, r);
+}
+
+std::string one_rtpu(Session& s) {
+    return "one RTPU (this process, slot 1) pinned " + s.cpu_name(0) +
+           ", FIXED policy, idle_poll_ns 0, counting semaphore in common memory";
+}
+
+// ---- one RTPU: P that blocks, and the V that wakes it back with the switch
+struct PingPong {
+    chm_rsem_t* sem = nullptr;
+    volatile std::uint64_t stamp_h = 0, stamp_l = 0;
+    std::uint64_t l_sum = 0;
+    volatile bool stop = false;
+};
+
+void rsem_block_rows(Session& s) {
+    Session::pin(s.cpu(0));
+    const kb::TickClock& clk = kb::tick_clock();
+    ipcb::BackplaneFile f("rsem1");
+    ipcb::Joined me(f.path, 1);
+    PingPong a;
+    a.sem = make_sem("pp");
+    Stats p_block, v_switch;
+    {
+        ipcb::Kernel k(1, 0);
+        std::function<void()> high = [&] {
+            auto round = [&] {
+                a.stamp_h = ticks();
+                check_rsem(chm_rsem_p(a.sem), "chm_rsem_p");
+                return ticks() - a.stamp_l;  // first instruction after L's V
+            };
+            v_switch = s.measure([&](std::uint64_t n) {
+                std::uint64_t sum = 0;
+                for (std::uint64_t i = 0; i < n; ++i) sum += round();
+                return clk.ns(sum) - double(n) * clk.pair_ns;
+            });
+            p_block = s.measure([&](std::uint64_t n) {
+                a.l_sum = 0;
+                for (std::uint64_t i = 0; i < n; ++i) round();
+                return clk.ns(a.l_sum) - double(n) * clk.pair_ns;
+            });
+            a.stop = true;
+        };
+        std::function<void()> low = [&] {
+            while (!a.stop) {
+                const std::uint64_t t = ticks();  // first instruction after H blocked
+                a.l_sum += t - a.stamp_h;
+                a.stamp_l = ticks();
+                check_rsem(chm_rsem_v(a.sem), "chm_rsem_v");
+            }
+        };
+        k.spawn(&high, 10, "high");
+        k.spawn(&low, 1, "low");
+        k.run();
+    }
+    s.emit("remote_semp_block",
+           one_rtpu(s) + "; chm_rsem_p by a priority-10 task on a count of 0: waiter record, park "
+                         "on the grant word, switch to the priority-1 task, until its first "
+                         "instruction; " + clk.name + " at both ends, its own cost subtracted; "
+                         "the priority-1 task's chm_rsem_v waking it back, switch included: " +
+               kb::fmt_ns(v_switch.median),
+           p_block.median, p_block.min, p_block.max);
+}
+CHM_BENCH_MEASUREMENT(rsem_block_rows, "remote_semp_block");
+
+// ---- one RTPU: V waking a lower-priority task (made ready, no switch).
+// H (10) times V(S) waking L (5), then blocks on the local semaphore B; L
+// takes S and blocks on S again; Z (1), running only when both wait, Vs B.
+void rsem_wake_local_row(Session& s) {
+    Session::pin(s.cpu(0));
+    const kb::TickClock& clk = kb::tick_clock();
+    ipcb::BackplaneFile f("rsem1w");
+    ipcb::Joined me(f.path, 1);
+    chm_rsem_t* sem = make_sem("wake");
+    chm_sem_t b;
+    chm_sem_init(&b, CHM_SEM_BINARY, 0, 0);
+    volatile bool stop = false;
+    {
+        ipcb::Kernel k(1, 0);
+        std::function<void()> high = [&] {
+            s.time_custom("remote_semv_wake_local",
+                          one_rtpu(s) + "; chm_rsem_v by a priority-10 task waking a priority-5 task "
+                                        "of the same RTPU blocked in chm_rsem_p (grant stored, "
+                                        "parked task made ready, no switch); " +
+                              clk.name + " around the call, its own cost subtracted",
+                          [&](std::uint64_t n) {
+                              std::uint64_t sum = 0;
+                              for (std::uint64_t i = 0; i < n; ++i) {
+                                  const std::uint64_t t0 = ticks();
+                                  check_rsem(chm_rsem_v(sem), "chm_rsem_v");
+                                  sum += ticks() - t0;
+                                  chm_sem_p(&b);  // L blocks again, Z gives b back
+                              }
+                              return clk.ns(sum) - double(n) * clk.pair_ns;
+                          });
+            stop = true;
+            check_rsem(chm_rsem_v(sem), "chm_rsem_v");
+        };
+        std::function<void()> low = [&] {
+            for (;;) {
+                check_rsem(chm_rsem_p(sem), "chm_rsem_p");
+                if (stop) return;
+            }
+        };
+        std::function<void()> lowest = [&] {
+            while (!stop) chm_sem_v(&b);
+        };
+        k.spawn(&high, 10, "high");
+        k.spawn(&low, 5, "low");
+        k.spawn(&lowest, 1, "lowest");
+        k.run();
+    }
+    chm_sem_destroy(&b);
+}
+CHM_BENCH_MEASUREMENT(rsem_wake_local_row, "remote_semv_wake_local");
+
+// ---- two RTPUs on two cores: a task on each hands two semaphores back
+// and forth. RT/2 = a V on one RTPU until the task it wakes on the other
+// runs.
+void rsem_xrtpu(Session& s, const std::string& row, std::uint64_t poll_ns, const std::string& mode) {
+    s.need_cpus(2);
+    Session::pin(s.cpu(0));
+    const kb::TickClock& clk = kb::tick_clock();
+    ipcb::BackplaneFile f("rsem2");
+    ipcb::Joined me(f.path, 1);
+    chm_rsem_t* ping = make_sem("ping");
+    chm_rsem_t* pong = make_sem("pong");
+    auto child = ipcb::rtpu_child(s.cpu(1), f.path, 2, poll_ns, ipcb::child_limit(s), [](ipcb::Kernel& k) {
+        static std::function<void()> body;
+        body = [] {
+            chm_rsem_t *pi = nullptr, *po = nullptr;
+            check_rsem(chm_rsem_open("ping", &pi), "chm_rsem_open ping");
+            check_rsem(chm_rsem_open("pong", &po), "chm_rsem_open pong");
+            for (;;) {
+                check_rsem(chm_rsem_p(pi), "chm_rsem_p");
+                check_rsem(chm_rsem_v(po), "chm_rsem_v");
+            }
+        };
+        k.spawn(&body, 10, "partner");
+    });
+    ipcb::wait_rtpus_running({2});
+    Stats v_call;
+    {
+        ipcb::Kernel k(1, poll_ns);
+        std::function<void()> body = [&] {
+            const std::string cfg =
+                "cross core: RTPU 1 (this process) pinned " + s.cpu_name(0) + ", RTPU 2 (a forked " +
+                "process) pinned " + s.cpu_name(1) + ", a priority-10 task on each, FIXED policy, " + mode +
+                "; counting semaphores in common memory; chm_rsem_v on one RTPU until the task it "
+                "wakes on the other returns from chm_rsem_p; RT/2 of the ping-pong";
+            // The caller's side alone: the V that grants and rings the other RTPU.
+            v_call = s.measure([&](std::uint64_t n) {
+                std::uint64_t sum = 0;
+                for (std::uint64_t i = 0; i < n; ++i) {
+                    const std::uint64_t t0 = ticks();
+                    check_rsem(chm_rsem_v(ping), "chm_rsem_v");
+                    sum += ticks() - t0;
+                    check_rsem(chm_rsem_p(pong), "chm_rsem_p");
+                }
+                return clk.ns(sum) - double(n) * clk.pair_ns;
+            });
+            s.time_ops(row, cfg + "; the V call alone on the caller's side: " + kb::fmt_ns(v_call.median),
+                       [&](std::uint64_t n) {
+                           for (std::uint64_t i = 0; i < n; ++i) {
+                               check_rsem(chm_rsem_v(ping), "chm_rsem_v");
+                               check_rsem(chm_rsem_p(pong), "chm_rsem_p");
+                           }
+                       },
+                       2);
+        };
+        k.spawn(&body, 10, "bench");
+        k.run();
+    }
+}
+
+void rsem_wake_remote_row(Session& s) {
+    rsem_xrtpu(s, "remote_semv_wake_remote", 0,
+               "idle_poll_ns 0 (an idle RTPU sleeps on its doorbell's futex at once: each wake-up is a "
+               "futex wake of the other process)");
+}
+CHM_BENCH_MEASUREMENT(rsem_wake_remote_row, "remote_semv_wake_remote");
+
+void rsem_polling_row(Session& s) {
+    rsem_xrtpu(s, "rsem_handoff_polling", kPollNs,
+               "idle_poll_ns " + std::to_string(kPollNs / 1000) +
+                   " us on both (an idle RTPU polls its doorbell that long before sleeping: a V "
+                   "stores the grant and the pending bit, no system call on either side)");
+}
+CHM_BENCH_MEASUREMENT(rsem_polling_row, "rsem_handoff_polling");
+
+}  // namespace
+}  // namespace chm::bench
