@@ -73,7 +73,8 @@ void rsem_block_rows(Session& s) {
                 check_rsem(chm_rsem_p(a.sem), "chm_rsem_p");
                 return ticks() - a.stamp_l;  // first instruction after L's V
             };
-            v_switch = s.measure([&](std::uint64_t n) {
+            // Only ~1/30 of each round is timed here: shorter runs.
+            v_switch = ipcb::measure_part(s, 1.0 / 16, [&](std::uint64_t n) {
                 std::uint64_t sum = 0;
                 for (std::uint64_t i = 0; i < n; ++i) sum += round();
                 return clk.ns(sum) - double(n) * clk.pair_ns;
@@ -122,11 +123,9 @@ void rsem_wake_local_row(Session& s) {
     {
         ipcb::Kernel k(1, 0);
         std::function<void()> high = [&] {
-            s.time_custom("remote_semv_wake_local",
-                          one_rtpu(s) + "; chm_rsem_v by a priority-10 task waking a priority-5 task "
-                                        "of the same RTPU blocked in chm_rsem_p (grant stored, "
-                                        "parked task made ready, no switch); " +
-                              clk.name + " around the call, its own cost subtracted",
+            // Only the V (~1/40 of each round) is timed: shorter runs.
+            std::string how;
+            const Stats st = ipcb::measure_part(s, 1.0 / 32,
                           [&](std::uint64_t n) {
                               std::uint64_t sum = 0;
                               for (std::uint64_t i = 0; i < n; ++i) {
@@ -136,7 +135,13 @@ void rsem_wake_local_row(Session& s) {
                                   chm_sem_p(&b);  // L blocks again, Z gives b back
                               }
                               return clk.ns(sum) - double(n) * clk.pair_ns;
-                          });
+                          }, &how);
+            s.emit("remote_semv_wake_local",
+                   one_rtpu(s) + "; chm_rsem_v by a priority-10 task waking a priority-5 task of the "
+                                 "same RTPU blocked in chm_rsem_p (grant stored, parked task made "
+                                 "ready, no switch); " +
+                       clk.name + " around the call, its own cost subtracted; " + how,
+                   st.median, st.min, st.max);
             stop = true;
             check_rsem(chm_rsem_v(sem), "chm_rsem_v");
         };
@@ -193,7 +198,7 @@ void rsem_xrtpu(Session& s, const std::string& row, std::uint64_t poll_ns, const
                 "; counting semaphores in common memory; chm_rsem_v on one RTPU until the task it "
                 "wakes on the other returns from chm_rsem_p; RT/2 of the ping-pong";
             // The caller's side alone: the V that grants and rings the other RTPU.
-            v_call = s.measure([&](std::uint64_t n) {
+            v_call = ipcb::measure_part(s, 0.25, [&](std::uint64_t n) {
                 std::uint64_t sum = 0;
                 for (std::uint64_t i = 0; i < n; ++i) {
                     const std::uint64_t t0 = ticks();

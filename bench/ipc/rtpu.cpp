@@ -75,6 +75,18 @@ chm_tid_t spawn_raw(void (*fn)(void*), void* arg, int priority, const char* name
     throw std::runtime_error(what + ": " + chm_bp_last_error() + " (" + std::strerror(r < 0 ? -r : r) + ")");
 }
 
+Stats measure_part(Session& s, double fraction, const std::function<double(std::uint64_t)>& body,
+                   std::string* how) {
+    Options o = s.options();
+    o.run_ns *= fraction;
+    std::vector<Measured> unused;
+    Session part(o, &unused);
+    const Stats st = part.measure(body);
+    if (how)
+        *how = "median of " + std::to_string(st.runs) + " runs x " + std::to_string(st.iters_per_run) + " ops";
+    return st;
+}
+
 double child_limit(const Session& s) { return s.options().watchdog_s + 10; }
 
 BackplaneFile::BackplaneFile(const char* what, std::uint32_t slots, std::uint32_t window) {

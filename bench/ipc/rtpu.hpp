@@ -86,6 +86,13 @@ std::unique_ptr<Child> rtpu_child(int cpu, const std::string& path, int slot,
 // process is attached to.
 void wait_rtpus_running(const std::vector<int>& slots);
 
+// Session::measure with one run aiming at `fraction` of the usual run
+// length: for bodies that time only a small part of each iteration (a V
+// inside a round of switches), so a row does not take 30 times the
+// usual wall time. The text "median of R runs x N ops" goes to *how.
+Stats measure_part(Session& s, double fraction, const std::function<double(std::uint64_t)>& body,
+                   std::string* how = nullptr);
+
 // Throw "what: chm_bp_last_error() (strerror)".
 [[noreturn]] void fail_bp(const std::string& what, int r);
 
