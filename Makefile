@@ -12,7 +12,7 @@ PKGS_CROSS = g++-m68k-linux-gnu libc6-dev-m68k-cross \
              g++-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user
 PKGS_BENCH = libbenchmark-dev rt-tests python3-matplotlib
 
-.PHONY: all deps deps-cross deps-bench build demo demo-multi test test-native test-m68k \
+.PHONY: all deps deps-cross deps-bench build demo demo-multi stress test test-native test-m68k \
         test-aarch64 bench clean
 
 all: build
@@ -44,6 +44,11 @@ demo-multi: build
 	@sh examples/multi/demo.sh $(BUILD)
 
 test: test-native test-m68k test-aarch64
+
+# The kill-at-a-named-point tests with 2000 kills per point, not 100.
+stress: deps $(BUILD)/build.ninja
+	meson compile -C $(BUILD)
+	CHM_KILL_REPEATS=2000 $(MESON_TEST) -C $(BUILD) --timeout-multiplier 30 ipc_recovery ipc_msgq_robust
 
 test-native: deps deps-bench $(BUILD)/build.ninja
 	meson compile -C $(BUILD)

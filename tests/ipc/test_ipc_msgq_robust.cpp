@@ -6,6 +6,8 @@
 // churn always leave a consistent queue.
 #include <sys/mman.h>
 
+#include "chimera/rsem.h"
+#include "chimera/shm.h"
 #include "msgq_fixture.hpp"
 
 namespace chm::test {
@@ -160,7 +162,7 @@ void die_at(const bp::Attachment& a, QueueHeader* q, int point) {
 }
 
 TEST_F(IpcMsgqRobust, LockHolderKilledAtEachNamedPointIsRepaired) {
-    constexpr int kRepeats = 15;
+    const int kRepeats = kill_repeats();
     create();
     ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
     chm_msgq_t* q = make_queue("lk", CHM_MSGQ_FIFO, 8, 4);
@@ -274,6 +276,43 @@ TEST_F(IpcMsgqRobust, RandomKillsDuringChurnLeaveAConsistentQueue) {
     }
     EXPECT_EQ(info(q).count, 0u);
     EXPECT_EQ(check(q), "");
+}
+
+}  // namespace
+}  // namespace chm::test
+
+namespace chm::test {
+namespace {
+
+// chimera-bpcheck looks inside every queue and remote semaphore: a count
+// that disagrees with the queued messages, a binary semaphore counting 3,
+// are each named with the object; restored, the file checks clean.
+TEST_F(IpcMsgqRobust, BpcheckLooksInsideQueuesAndSemaphores) {
+    create();
+    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
+    chm_msgq_t* q = make_queue("cq", CHM_MSGQ_FIFO, 8, 4);
+    ASSERT_NE(q, nullptr);
+    for (std::uint32_t v : {1u, 2u}) ASSERT_EQ(chm_msgq_try_send(q, 0, 0, &v, sizeof v), 0);
+    chm_rsem_t* s = nullptr;
+    ASSERT_EQ(chm_rsem_create("cs", CHM_SEM_BINARY, 1, CHM_SHM_COMMON, &s), 0) << chm_bp_last_error();
+    std::string out;
+    ASSERT_EQ(bpcheck(path_, &out), 0) << out;
+
+    auto* qh = reinterpret_cast<QueueHeader*>(q);
+    qh->count.store(7);
+    // The semaphore's count: after its lock and two words (magic, kind).
+    auto* count = reinterpret_cast<bp::A32*>(reinterpret_cast<char*>(s) + sizeof(bp::Lock) + 8);
+    ASSERT_EQ(count->load(), 1u);
+    count->store(3);
+    EXPECT_NE(bpcheck(path_, &out), 0) << out;
+    EXPECT_NE(out.find("\"cq\": count 7, 2 queued"), std::string::npos) << out;
+    EXPECT_NE(out.find("\"cs\": binary, count 3"), std::string::npos) << out;
+
+    qh->count.store(2);
+    count->store(1);
+    EXPECT_EQ(bpcheck(path_, &out), 0) << out;
+    EXPECT_EQ(chm_rsem_close(s), 0);
+    EXPECT_EQ(chm_rsem_destroy("cs"), 0);
 }
 
 }  // namespace

@@ -118,7 +118,7 @@ TEST_F(IpcRecovery, RegistryLockHeldByDeadProcessIsRecovered) {
     enum Point {
         kJustLocked, kArenaMidSplit, kAllocatedUncommitted, kEntryHalfWritten, kEntryPublishedUncommitted, kPoints
     };
-    constexpr int kRepeats = 25;
+    const int kRepeats = kill_repeats();
     for (int run = 0; run < kPoints * kRepeats; ++run) {
         const int point = run % kPoints;
         SCOPED_TRACE(point);

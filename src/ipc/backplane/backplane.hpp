@@ -250,6 +250,14 @@ namespace msgq {
 void recover(const bp::View& v, std::uint32_t entry_index, std::uint32_t dead_slot,
              std::uint32_t dead_gen, std::uint32_t recovery_token);
 }
+// Their strict read-only checks of one live object at `off` (`size` bytes
+// allocated), called by check_backplane for each registry entry of their
+// kind: one Report line per problem, prefixed with `name`. An object whose
+// lock a live process holds may be mid-change and is skipped.
+void rsem_check(const bp::View& v, std::uint32_t off, std::uint32_t size, const char* name, bp::Report& r);
+namespace msgq {
+void check_entry(const bp::View& v, std::uint32_t off, std::uint32_t size, const char* name, bp::Report& r);
+}
 }  // namespace chm::ipc
 namespace chm::bp {
 

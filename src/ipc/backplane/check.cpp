@@ -93,6 +93,19 @@ bool payload_ok(const View& v, const RegistryEntry* e, std::uint32_t i, Report& 
     return true;
 }
 
+// The object's own structure, by its kind's checker (those without one,
+// like shared memory, are plain bytes).
+void check_object(const View& v, const RegistryEntry* e, std::uint32_t i, const char* name, Report& r) {
+    char label[kNameMax + 32];
+    std::snprintf(label, sizeof label, "registry[%u] \"%s\"", i, name);
+    const std::uint32_t off = e->offset.load(R), size = e->size.load(R);
+    switch (e->kind.load(R)) {
+    case kKindRemoteSem: chm::ipc::rsem_check(v, off, size, label, r); break;
+    case kKindMsgQueue: chm::ipc::msgq::check_entry(v, off, size, label, r); break;
+    default: break;
+    }
+}
+
 void check_registry(const View& v, Report& r, Summary* sum) {
     const std::uint32_t cap = v.hdr()->geo.registry_capacity;
     std::uint32_t live_mask = 0;
@@ -120,7 +133,7 @@ void check_registry(const View& v, Report& r, Summary* sum) {
         std::size_t len;
         if (!valid_name(name, &len) || reinterpret_cast<const char*>(e->name_words)[kNameMax] != 0)
             r.problem("registry[%u].name is empty or not NUL-terminated", i);
-        payload_ok(v, e, i, r);
+        const bool payload = payload_ok(v, e, i, r);
         const std::uint32_t att = e->attached.load(R);
         if (att & ~live_mask) r.problem("registry[%u] \"%s\".attached 0x%08x names slots that are not live", i, name, att);
         if (state == std::uint32_t(EntryState::Destroying)) {
@@ -129,6 +142,7 @@ void check_registry(const View& v, Report& r, Summary* sum) {
             continue;
         }
         ++sum->objects;
+        if (payload) check_object(v, e, i, name, r);
         for (std::uint32_t j = 0; j < i; ++j) {
             const RegistryEntry* o = v.entry(j);
             char other[kNameMax + 1];

@@ -210,6 +210,14 @@ void ensure_recovery_registered() {
     g_registered.store(true, std::memory_order_release);
 }
 
+void check_entry(const bp::View& v, std::uint32_t off, std::uint32_t size, const char* name, bp::Report& r) {
+    if (size < sizeof(QueueHeader)) return r.problem("%s: %u bytes, smaller than a queue header", name, size);
+    const auto* q = v.at<QueueHeader>(off);
+    const std::uint32_t tok = q->lock.token.load(R);
+    if (tok && bp::token_alive(v, tok, true)) return;  // a live holder may be mid-change
+    check_queue(v, q, size, name, r);
+}
+
 void check_queue(const bp::View& v, const QueueHeader* cq, std::uint32_t payload_size, const char* name,
                  bp::Report& rep) {
     auto* q = const_cast<QueueHeader*>(cq);  // read only: slot_at wants a mutable header

@@ -161,6 +161,39 @@ void rsem_recover(const View& v, std::uint32_t index, std::uint32_t dead_slot, s
                      to_wake[i]->as_task.load() != 0);
 }
 
+void rsem_check(const View& v, std::uint32_t off, std::uint32_t size, const char* name, Report& r) {
+    constexpr auto R = std::memory_order_relaxed;
+    if (size < sizeof(Rsem)) return r.problem("%s: %u bytes, smaller than a remote semaphore", name, size);
+    const auto* s = v.at<Rsem>(off);
+    if (s->magic.load(R) != kRsemMagic) return r.problem("%s: no remote-semaphore magic", name);
+    const std::uint32_t kind = s->kind.load(R);
+    if (kind != CHM_SEM_BINARY && kind != CHM_SEM_COUNTING) return r.problem("%s: kind %u is not a semaphore kind", name, kind);
+    if (s->broken.load(R)) r.problem("%s: marked broken", name);
+    const std::uint32_t tok = s->lock.token.load(R);
+    if (tok && bp::token_alive(v, tok, true)) return;  // a live holder may be mid-change
+    if (tok) r.problem("%s: lock held by a dead owner (token %08x)", name, tok);
+    if (!tok && s->lock.dirty.load(R)) r.problem("%s: lock free but dirty", name);
+    const std::uint32_t count = s->count.load(R);
+    if (kind == CHM_SEM_BINARY && count > 1) r.problem("%s: binary, count %u", name, count);
+    std::uint32_t waiting = 0;
+    for (std::uint32_t i = 0; i < CHM_RSEM_WAITERS; ++i) {
+        const Waiter& w = s->w[i];
+        const std::uint32_t st = w.state.load(R);
+        if (st == kFree) continue;
+        if (st != kWaiting && st != kGranted) {
+            r.problem("%s: waiter %u has state %u", name, i, st);
+            continue;
+        }
+        waiting += st == kWaiting;
+        const std::uint32_t slot = w.slot.load(R);
+        if (slot >= v.slots() || !token_alive(v, make_token(slot, w.gen.load(R)), true))
+            r.problem("%s: waiter %u (%s) belongs to slot %u generation %u, not a live process", name, i,
+                      st == kWaiting ? "waiting" : "granted", slot, w.gen.load(R));
+    }
+    if (s->nwaiting.load(R) != waiting) r.problem("%s: nwaiting %u, %u records waiting", name, s->nwaiting.load(R), waiting);
+    if (count > 0 && waiting > 0) r.problem("%s: count %u while %u waiters wait", name, count, waiting);
+}
+
 }  // namespace chm::ipc
 
 using namespace chm::ipc;
