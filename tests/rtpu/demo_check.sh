@@ -17,6 +17,8 @@ fail() {
     rm -rf "$dir"
     exit 1
 }
+# Killed from outside (meson's timeout): the RTPUs and the files go too.
+trap 'pkill -9 -f "chimera-rtpu --backplane $bp" 2>/dev/null; rm -rf "$dir"; exit 1' INT TERM HUP
 CHIMERA_BACKPLANE=$bp DEMO_SECONDS=3 timeout -k 5 60 sh "$src/examples/loop/demo.sh" "$build" > "$out" 2>&1 ||
     fail "the demo exited with status $?"
 cat "$out"
