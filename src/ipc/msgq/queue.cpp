@@ -12,6 +12,7 @@
 #include "chimera/task.h"
 #include "ipc/msgq/msgq.hpp"
 #include "ipc/wake/wake.hpp"
+#include "kernel/sync/remote_wait.hpp"
 
 namespace chm::ipc::msgq {
 
@@ -120,11 +121,7 @@ std::uint64_t now_ns(bool task) {
     return std::uint64_t(ts.tv_sec) * 1000000000ull + std::uint64_t(ts.tv_nsec);
 }
 
-std::int32_t my_priority(bool task) {
-    if (!task) return 0;
-    chm_task_status_t st;
-    return chm_task_status(chm_task_self(), &st) == 0 ? st.priority : 0;
-}
+std::int32_t my_priority(bool task) { return task ? kernel::remote_waiter_priority() : 0; }
 
 // A free record for the caller, or nullptr (all taken: the caller polls).
 Waiter* register_locked(QueueHeader* q, std::uint32_t state, std::uint32_t me, bool task,

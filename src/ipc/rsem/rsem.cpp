@@ -12,6 +12,7 @@
 #include "chimera/task.h"
 #include "ipc/backplane/backplane.hpp"
 #include "ipc/wake/wake.hpp"
+#include "kernel/sync/remote_wait.hpp"
 
 using namespace chm::bp;
 
@@ -118,13 +119,6 @@ int give_locked(Rsem* s, Waiter** woken) {
     if (s->count.load() == UINT32_MAX) return -EOVERFLOW;
     s->count.fetch_add(1);
     return 0;
-}
-
-int my_priority() {
-    chm_task_status_t st;
-    const chm_tid_t me = chm_task_self();
-    if (me == CHM_TID_NONE || chm_task_status(me, &st) != 0) return 0;
-    return st.priority;
 }
 
 }  // namespace
@@ -291,7 +285,7 @@ int chm_rsem_p_timed(chm_rsem_t* h, int64_t timeout_ns) {
     me->grant.store(0);
     me->slot.store(a->slot);
     me->gen.store(a->gen & 0xFFFFFF);
-    me->prio.store(std::uint32_t(my_priority()));
+    me->prio.store(std::uint32_t(chm::kernel::remote_waiter_priority()));
     me->seq.store(s->seq.fetch_add(1) + 1);
     me->as_task.store(waits_as_task() ? 1 : 0);
     me->state.store(kWaiting);

@@ -18,6 +18,11 @@ bool remote_wait_possible() {
     return cur && !cur->lock_nest;
 }
 
+int remote_waiter_priority() {
+    const Tcb* cur = port::on_kernel_thread() ? g_k.current : nullptr;
+    return cur ? cur->s.priority : 0;
+}
+
 void remote_scan_locked() {
     Tcb* t = g_remote.head;
     while (t) {

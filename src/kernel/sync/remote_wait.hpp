@@ -17,6 +17,11 @@ inline constexpr int kGrantVector = 31;
 // not locked into the CPU, not in an interrupt handler).
 bool remote_wait_possible();
 
+// The calling task's static priority (0 outside a task): what a waiter
+// record on the backplane ranks by. O(1), unlike chm_task_status (which
+// measures the stack's high-water mark).
+int remote_waiter_priority();
+
 // Park the calling task until *word != 0, or `timeout_ns` passes (< 0: no
 // limit). Returns 0 (word set), -ETIMEDOUT, -EINTR (a user signal) or
 // -EPERM (not a task that can park: use a futex instead).
