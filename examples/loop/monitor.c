@@ -96,6 +96,7 @@ int main(int argc, char **argv) {
     /* Records queued before we came are history: start from the newest. */
     loop_stat_t st, prev = {0};
     while (chm_msgq_try_receive(q, &st, sizeof st, NULL) == (int)sizeof st) prev = st;
+    const loop_stat_t base = prev; /* the summary counts from here */
 
     static window_t sec, all;
     uint64_t gaps = 0, first = 0;
@@ -142,7 +143,8 @@ int main(int argc, char **argv) {
     size_t n = all.answered < WINDOW_MAX ? all.answered : WINDOW_MAX;
     printf("summary: %zu cycles in %d s, %zu answered in time, %u answers lost, %u deadline misses; "
            "round trip p50 %.0f us p99 %.0f us (first %zu answers)\n",
-           all.records, seconds, all.answered, prev.lost, prev.misses, quantile_us(all.round_trip, n, 0.5),
+           all.records, seconds, all.answered, prev.lost - base.lost, prev.misses - base.misses,
+           quantile_us(all.round_trip, n, 0.5),
            quantile_us(all.round_trip, n, 0.99), n);
     if (gaps) {
         printf("records: %llu of the sensor's cycles never reached the monitor\n", (unsigned long long)gaps);
