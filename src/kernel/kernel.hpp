@@ -15,6 +15,7 @@
 #include "chimera/task.h"
 #include "chimera/usig.h"
 #include "port.hpp"
+#include "sched/readyq.hpp"
 
 namespace chm::kernel {
 
@@ -143,22 +144,7 @@ struct TimerLess {
 struct TimerSlot {
     static void set(TimerNode* n, std::int32_t i) { n->idx = i; }
 };
-struct ReadyLess {
-    const chm_sched_ops_t* ops = nullptr;
-    void* self = nullptr;
-    std::uint64_t now = 0;
-    // The policy decides; equals (round-robin partners) go by arrival.
-    bool operator()(const chm_sched_task_t* a, const chm_sched_task_t* b) const {
-        if (ops->before(self, a, b, now)) return true;
-        if (ops->before(self, b, a, now)) return false;
-        return a->seq < b->seq;
-    }
-};
-struct ReadySlot {
-    static void set(chm_sched_task_t* t, std::int32_t i) { t->slot = i; }
-};
 using TimerHeap = IndexedHeap<TimerNode, TimerLess, TimerSlot>;
-using ReadyHeap = IndexedHeap<chm_sched_task_t, ReadyLess, ReadySlot>;
 
 struct Kernel {
     bool initialised = false;
@@ -170,14 +156,20 @@ struct Kernel {
     Tcb* current = nullptr;     // the running task; nullptr = kernel/idle
     port::Context idle_ctx;     // chm_kernel_run's own context
     Tcb* zombie = nullptr;      // ended task whose stack is freed after the switch
+    int* errno_loc = nullptr;   // the kernel thread's errno (every task runs there)
     bool in_irq = false;        // an interrupt handler runs (irq/irq.cpp): no switch
+    bool switch_timed = false;  // cfg.cpu_accounting || cfg.quantum_ns: a switch reads the clock
 
     // Scheduling.
     const chm_sched_ops_t* ops = nullptr;
     void* ops_self = nullptr;
     chm_sched_policy policy = CHM_SCHED_MUF;
+    // A built-in policy is in force (not CHM_SCHED_USER): the dispatcher
+    // calls its queue and comparison directly instead of through `ops`
+    // (same operations, no indirect call per switch).
+    bool builtin = true;
     std::uint64_t seq = 0;
-    ReadyHeap rq;               // the ready queue of the built-in policies
+    ReadyQueue rq;              // the ready queue of the built-in policies
 
     // Time.
     TimerHeap timers;
@@ -251,7 +243,12 @@ int block_current_locked();
 // Work owed to the current task in its own context: user signals, deadline
 // handler, aborted cycle. Called with the mask held; releases it around
 // user code.
-void deliver_pending_locked();
+void deliver_pending_slow_locked();
+inline void deliver_pending_locked() {
+    const Tcb* cur = g_k.current;
+    if (cur && (cur->miss_pending || (cur->sig_pending & ~cur->sig_blocked)))
+        deliver_pending_slow_locked();
+}
 void charge_current_locked(std::uint64_t now);
 
 // ---- interrupts (irq/irq.cpp)
@@ -299,10 +296,27 @@ std::size_t stack_dirty_estimate(const Tcb* t);
 
 // ---- scheduling policies (sched/*.cpp)
 int sched_select(chm_sched_policy policy, const chm_sched_ops_t* user, void* user_arg);
-// Validate what `pick` returned; falls back to MUF on failure. Returns the
-// task to run or nullptr.
-Tcb* sched_pick_locked(std::uint64_t now);
-bool sched_before_locked(Tcb* a, Tcb* b, std::uint64_t now);
+// A user scheduler's pick, validated; falls back to MUF on failure.
+Tcb* sched_pick_user_locked(std::uint64_t now);
+// The task to run next (left in the ready set) or nullptr.
+inline Tcb* sched_pick_locked(std::uint64_t now) {
+    if (g_k.builtin) return g_k.rq.top();
+    return sched_pick_user_locked(now);
+}
+// `a` must run before `b` (the policy's `before`).
+inline bool sched_before_locked(Tcb* a, Tcb* b, std::uint64_t now) {
+    if (g_k.builtin) return key_before(g_k.policy, &a->s, &b->s);
+    return g_k.ops->before(g_k.ops_self, &a->s, &b->s, now) != 0;
+}
+// Queue a ready task in the scheduler (in_ready is set by the caller).
+inline void sched_enqueue_locked(Tcb* t) {
+    if (g_k.builtin) g_k.rq.push(t, rq_key(g_k.policy, &t->s));
+    else g_k.ops->enqueue(g_k.ops_self, &t->s, now_cached_locked());
+}
+inline void sched_dequeue_locked(Tcb* t) {
+    if (g_k.builtin) g_k.rq.remove(t);
+    else g_k.ops->dequeue(g_k.ops_self, &t->s);
+}
 bool sched_reserve(std::size_t tasks);
 
 // ---- wait queues (sync/waitq.cpp)
@@ -322,3 +336,4 @@ struct IrqGuard {
 }  // namespace chm::kernel
 
 #include "core/indexed_heap.inl"
+#include "sched/readyq.inl"

@@ -29,14 +29,14 @@ void make_ready_locked(Tcb* t, bool keep_place) {
     if (!keep_place) t->s.seq = ++g_k.seq;
     if (!t->in_ready) {
         t->in_ready = true;
-        g_k.ops->enqueue(g_k.ops_self, &t->s, now_cached_locked());
+        sched_enqueue_locked(t);
     }
 }
 
 void unready_locked(Tcb* t) {
     if (t->in_ready) {
         t->in_ready = false;
-        g_k.ops->dequeue(g_k.ops_self, &t->s);
+        sched_dequeue_locked(t);
     }
 }
 
@@ -69,51 +69,78 @@ void arm_quantum_if_shared_locked(Tcb* t, std::uint64_t now) {
 // Switch from the current context (a task or the kernel's own) to `next`
 // (nullptr = the kernel's idle loop). Returns in the original context when
 // it is scheduled again.
-void switch_to_locked(Tcb* next, std::uint64_t now) {
+// Never inlined: it must stay the one call site of the port switch.
+__attribute__((noinline)) void switch_to_locked(Tcb* next, std::uint64_t now) {
     Tcb* prev = g_k.current;
     port::Context* from = prev ? &prev->ctx : &g_k.idle_ctx;
     port::Context* to = next ? &next->ctx : &g_k.idle_ctx;
-    if (prev) prev->saved_errno = errno;
+    int* err = g_k.errno_loc;  // errno without a TLS lookup per switch
+    if (prev) prev->saved_errno = *err;
     g_k.current = next;
     if (g_k.cfg.cpu_accounting) g_k.switched_in_at = now;
     g_k.quantum_due = 0;
-    if (next) arm_quantum_if_shared_locked(next, now);
+    if (next && g_k.cfg.quantum_ns) arm_quantum_if_shared_locked(next, now);
     ++g_k.switches;
-    port::context_switch(from, to);
+    port::context_switch_same_site(from, to);  // the kernel's only switch site
     // Back in `prev`'s context.
-    if (Tcb* z = g_k.zombie) {  // its stack is no longer in use
+    if (Tcb* z = g_k.zombie) [[unlikely]] {  // its stack is no longer in use
         g_k.zombie = nullptr;
         task_free_stack(z);
     }
-    if (g_k.current) errno = g_k.current->saved_errno;
+    if (g_k.current) *err = g_k.current->saved_errno;
+}
+
+// The running task `cur` gives the CPU to `head`, the scheduler's pick:
+// behind its equals (keep_place false) or first among them (preempted).
+// Under a built-in policy `cur` takes the top's place in the heap: one sift
+// instead of a push and a pop.
+inline __attribute__((always_inline)) void requeue_and_switch_locked(Tcb* cur, Tcb* head, bool keep_place,
+                                                                 std::uint64_t now) {
+    if (g_k.builtin && !cur->in_ready && !cur->suspend_count) {
+        cur->state = TaskState::Ready;
+        if (!keep_place) cur->s.seq = ++g_k.seq;
+        cur->in_ready = true;
+        head->in_ready = false;
+        g_k.rq.replace_top(cur, rq_key(g_k.policy, &cur->s));
+    } else {
+        make_ready_locked(cur, keep_place);
+        unready_locked(head);
+    }
+    head->state = TaskState::Running;
+    switch_to_locked(head, now);
 }
 
 }  // namespace
 
-void schedule_locked() {
-    // Read the clock only when something needs it: per-switch CPU
-    // accounting or a round-robin quantum (a clock read costs more than the
-    // rest of a switch on a virtual machine).
+// Read the clock only when something needs it: per-switch CPU accounting
+// or a round-robin quantum (a clock read costs more than the rest of a
+// switch on a virtual machine).
+inline std::uint64_t schedule_now_locked() {
     const bool timed = g_k.cfg.cpu_accounting || g_k.cfg.quantum_ns;
     const std::uint64_t now = timed ? now_locked() : now_cached_locked();
     if (g_k.cfg.cpu_accounting) charge_current_locked(now);
+    return now;
+}
+
+void schedule_locked() {
+    const std::uint64_t now = schedule_now_locked();
     Tcb* cur = g_k.current;
     const bool cur_runs = cur && cur->state == TaskState::Running;
     if (cur_runs && cur->lock_nest) return;
     Tcb* head = sched_pick_locked(now);
     if (cur_runs) {
         if (!head) return;
-        const bool quantum_over = g_k.quantum_due && now >= g_k.quantum_due;
-        if (!sched_before_locked(head, cur, now)) {
-            if (sched_before_locked(cur, head, now)) return;
-            if (!quantum_over) {
-                arm_quantum_if_shared_locked(cur, now);
-                return;
-            }
-            make_ready_locked(cur);  // round robin: to the back of its equals
-        } else {
-            make_ready_locked(cur, true);  // preempted: first among its equals
+        if (sched_before_locked(head, cur, now)) {
+            requeue_and_switch_locked(cur, head, true, now);  // preempted
+            return;
         }
+        if (sched_before_locked(cur, head, now)) return;
+        if (!(g_k.quantum_due && now >= g_k.quantum_due)) {
+            arm_quantum_if_shared_locked(cur, now);
+            return;
+        }
+        requeue_and_switch_locked(cur, head, false, now);  // round robin
+        return;
     }
     if (head) {
         unready_locked(head);
@@ -122,6 +149,75 @@ void schedule_locked() {
     if (head == cur) return;
     switch_to_locked(head, now);
 }
+
+namespace {
+
+// A yield under built-in policy P: the same decision as make_ready +
+// schedule, in one heap operation with the key computed once. The
+// yielder's seq is the newest, so its key sorts before the top's only when
+// the policy puts it strictly first: then it keeps the CPU.
+template <chm_sched_policy P>
+inline __attribute__((always_inline)) void yield_builtin_locked(Tcb* cur, std::uint64_t now) {
+    cur->s.seq = ++g_k.seq;
+    const RqKey k = rq_key<P>(&cur->s);
+    if (!g_k.rq.size() || g_k.rq.top_after(k)) return;
+    Tcb* head = g_k.rq.top();
+    cur->state = TaskState::Ready;
+    cur->in_ready = true;
+    head->in_ready = false;
+    g_k.rq.replace_top(cur, k);
+    head->state = TaskState::Running;
+    switch_to_locked(head, now);
+}
+
+}  // namespace
+
+namespace {
+
+// Everything but a yield under a built-in policy from a plain running task.
+__attribute__((noinline, cold)) void yield_slow_locked(Tcb* cur) {
+    make_ready_locked(cur);  // behind its equals
+    reschedule_locked();
+}
+
+// Yield the CPU to the next task at least as urgent (behind its equals).
+inline __attribute__((always_inline)) void yield_current_locked() {
+    Tcb* cur = g_k.current;
+    // A Running task is neither queued nor suspended (both leave Running).
+    if (!g_k.builtin || g_k.in_irq || cur->state != TaskState::Running) [[unlikely]] {
+        yield_slow_locked(cur);
+        return;
+    }
+    // The clock only when the switch uses it (accounting, quantum).
+    const std::uint64_t now = g_k.switch_timed ? schedule_now_locked() : 0;
+    switch (g_k.policy) {
+    case CHM_SCHED_FIXED: yield_builtin_locked<CHM_SCHED_FIXED>(cur, now); break;
+    case CHM_SCHED_RM: yield_builtin_locked<CHM_SCHED_RM>(cur, now); break;
+    case CHM_SCHED_EDF: yield_builtin_locked<CHM_SCHED_EDF>(cur, now); break;
+    case CHM_SCHED_MLF: yield_builtin_locked<CHM_SCHED_MLF>(cur, now); break;
+    default: yield_builtin_locked<CHM_SCHED_MUF>(cur, now); break;
+    }
+    deliver_pending_locked();
+}
+
+}  // namespace
+}  // namespace chm::kernel
+
+namespace {
+void task_yield() {
+    using namespace chm::kernel;
+    chm::port::irq_disable();
+    if (g_k.current) [[likely]] yield_current_locked();
+    chm::port::irq_restore();
+}
+}  // namespace
+
+// Here rather than with the other timing calls (time/periodic.cpp) so the
+// whole yield inlines into one function; returns through the port's
+// indirect return (a yield returns to another task's caller).
+extern "C" void chm_task_yield(void) { chm::port::call_indirect_return(task_yield); }
+
+namespace chm::kernel {
 
 int block_current_locked() {
     Tcb* cur = g_k.current;
@@ -137,7 +233,7 @@ int block_current_locked() {
     return cur->wait_result;
 }
 
-void deliver_pending_locked() {
+void deliver_pending_slow_locked() {
     for (;;) {
         Tcb* cur = g_k.current;
         if (!cur) return;

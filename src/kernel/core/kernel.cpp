@@ -101,6 +101,7 @@ int chm_kernel_init(const chm_kernel_config_t* cfg) {
     if (!c.default_stack) c.default_stack = 64 * 1024;
     if (int e = sched_select(c.policy, c.user_sched, c.user_sched_arg)) return e;
     g_k.cfg = c;
+    g_k.switch_timed = c.cpu_accounting || c.quantum_ns;
     g_k.vnow = 0;
     if (!c.virtual_clock) {
         dispatch_install_hooks();
@@ -126,6 +127,7 @@ int chm_kernel_init(const chm_kernel_config_t* cfg) {
 int chm_kernel_run(void) {
     if (!g_k.initialised || g_k.current) return -EPERM;
     port::irq_disable();
+    g_k.errno_loc = &errno;  // tasks run on this thread only
     g_k.running = true;
     const int r = idle_loop_locked();
     g_k.running = false;
@@ -189,9 +191,9 @@ void chm_kernel_fini(void) {
     // reset everything else.
     Tcb* tcbs = g_k.tcbs;
     const std::uint32_t hw = g_k.tcb_hw;
-    ReadyHeap rq = g_k.rq;
+    ReadyQueue rq = g_k.rq;
     TimerHeap timers = g_k.timers;
-    while (rq.size()) rq.remove(rq.top());
+    rq.clear();
     while (timers.size()) timers.remove(timers.top());
     g_k = Kernel{};
     g_k.tcbs = tcbs;

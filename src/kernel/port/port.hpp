@@ -70,6 +70,32 @@ inline void context_switch(Context* from, Context* to) {
     chm_port_switch(&from->sp, to->sp);
 }
 
+// The same switch for a caller that makes every switch from one call site
+// (the kernel's dispatcher): the incoming context resumes at the address
+// the processor's return predictor expects, so a port may end it with a
+// plain return. Frames are identical to chm_port_switch's; a port without
+// its own version (CHM_PORT_HAS_SWITCH_SAME_SITE) uses chm_port_switch.
+#if defined(CHM_PORT_HAS_SWITCH_SAME_SITE)
+extern "C" void chm_port_switch_same_site(void** save_sp, void* load_sp);
+inline void context_switch_same_site(Context* from, Context* to) {
+    chm_port_switch_same_site(&from->sp, to->sp);
+}
+#else
+inline void context_switch_same_site(Context* from, Context* to) { context_switch(from, to); }
+#endif
+
+// Call `fn()`, then return to the caller of the function that tail-calls
+// this through an indirect jump instead of a return: for a kernel entry
+// that switches tasks, whose return address is the incoming task's caller
+// rather than the one the return predictor holds. A port without it
+// (CHM_PORT_HAS_CALL_INDIRECT_RETURN) simply calls fn.
+#if defined(CHM_PORT_HAS_CALL_INDIRECT_RETURN)
+extern "C" void chm_port_call_indirect_return(void (*fn)());
+inline void call_indirect_return(void (*fn)()) { chm_port_call_indirect_return(fn); }
+#else
+inline void call_indirect_return(void (*fn)()) { fn(); }
+#endif
+
 // ------------------------------------------------------- test-and-set lock
 
 // Atomically set the byte at `b` and report whether it was clear before:

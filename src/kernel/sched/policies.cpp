@@ -12,61 +12,24 @@ namespace chm::kernel {
 
 namespace {
 
-constexpr std::uint64_t kNever = UINT64_MAX;
-constexpr std::int32_t kInCriticalSet = 1;
-
-// Laxity without the common "- now": deadline minus remaining work. Waiting
-// tasks keep their key; only the running task's remaining work shrinks.
-std::uint64_t lax_key(const chm_sched_task_t* t) {
-    if (t->abs_deadline_ns == kNever) return kNever;
-    const std::uint64_t rem = t->wcet_ns > t->cycle_cpu_ns ? t->wcet_ns - t->cycle_cpu_ns : 0;
-    return t->abs_deadline_ns > rem ? t->abs_deadline_ns - rem : 0;
+// Each table's `before` is the kernel's own comparison (sched/readyq.hpp),
+// so a built-in table installed as a user scheduler orders exactly as the
+// kernel's direct path does.
+template <chm_sched_policy P>
+int before(void*, const chm_sched_task_t* a, const chm_sched_task_t* b, std::uint64_t) {
+    return key_before<P>(a, b);
 }
 
-std::uint64_t rm_key(const chm_sched_task_t* t) { return t->period_ns ? t->period_ns : kNever; }
-
-// Each returns <0 when a is more urgent, >0 when b is, 0 when equal.
-template <class K>
-int cmp(K a, K b) { return a < b ? -1 : (a > b ? 1 : 0); }
-
-int by_priority(const chm_sched_task_t* a, const chm_sched_task_t* b) {
-    return cmp(b->priority, a->priority);  // higher first
+// ---- shared queue operations over g_k.rq (keyed by the table's policy)
+template <chm_sched_policy P>
+void rq_enqueue(void*, chm_sched_task_t* t, std::uint64_t) {
+    g_k.rq.push(tcb_of(t), rq_key<P>(t));
 }
-
-int fixed_before(void*, const chm_sched_task_t* a, const chm_sched_task_t* b, std::uint64_t) {
-    return by_priority(a, b) < 0;
+void rq_dequeue(void*, chm_sched_task_t* t) { g_k.rq.remove(tcb_of(t)); }
+chm_sched_task_t* rq_pick(void*, std::uint64_t) {
+    Tcb* t = g_k.rq.top();
+    return t ? &t->s : nullptr;
 }
-
-int rm_before(void*, const chm_sched_task_t* a, const chm_sched_task_t* b, std::uint64_t) {
-    if (int c = cmp(rm_key(a), rm_key(b))) return c < 0;
-    return by_priority(a, b) < 0;
-}
-
-int edf_before(void*, const chm_sched_task_t* a, const chm_sched_task_t* b, std::uint64_t) {
-    if (int c = cmp(a->abs_deadline_ns, b->abs_deadline_ns)) return c < 0;
-    return by_priority(a, b) < 0;
-}
-
-int mlf_before(void*, const chm_sched_task_t* a, const chm_sched_task_t* b, std::uint64_t) {
-    if (int c = cmp(lax_key(a), lax_key(b))) return c < 0;
-    return by_priority(a, b) < 0;
-}
-
-// MUF: criticality, then least laxity, then user priority (then arrival).
-int muf_before(void*, const chm_sched_task_t* a, const chm_sched_task_t* b, std::uint64_t) {
-    const int ca = a->flags & kInCriticalSet, cb = b->flags & kInCriticalSet;
-    if (ca != cb) return ca > cb;
-    if (int c = cmp(lax_key(a), lax_key(b))) return c < 0;
-    return by_priority(a, b) < 0;
-}
-
-// ---- shared queue operations over g_k.rq
-void rq_enqueue(void*, chm_sched_task_t* t, std::uint64_t now) {
-    g_k.rq.less.now = now;
-    g_k.rq.push(t);
-}
-void rq_dequeue(void*, chm_sched_task_t* t) { g_k.rq.remove(t); }
-chm_sched_task_t* rq_pick(void*, std::uint64_t) { return g_k.rq.top(); }
 int admit_any(void*, chm_sched_task_t* t) {
     t->flags = 0;
     return 0;
@@ -113,10 +76,10 @@ void muf_recompute(Tcb* leaving) {
 // The heap is keyed by the flags, so re-sort the ready tasks afterwards.
 void muf_resort() {
     const std::size_t n = g_k.rq.size();
-    for (std::size_t i = 0; i < n && i < g_scratch_cap; ++i) g_scratch[i] = tcb_of(g_k.rq.at(i));
+    for (std::size_t i = 0; i < n && i < g_scratch_cap; ++i) g_scratch[i] = g_k.rq.at(i);
     const std::size_t m = n < g_scratch_cap ? n : g_scratch_cap;
-    for (std::size_t i = 0; i < m; ++i) g_k.rq.remove(&g_scratch[i]->s);
-    for (std::size_t i = 0; i < m; ++i) g_k.rq.push(&g_scratch[i]->s);
+    g_k.rq.clear();
+    for (std::size_t i = 0; i < m; ++i) g_k.rq.push(g_scratch[i], rq_key<CHM_SCHED_MUF>(&g_scratch[i]->s));
 }
 
 int muf_admit(void*, chm_sched_task_t* t) {
@@ -139,7 +102,7 @@ void muf_retire(void*, chm_sched_task_t* t) {
 }  // namespace
 
 bool sched_reserve(std::size_t tasks) {
-    if (!g_k.rq.reserve(tasks)) return false;
+    if (!g_k.rq.reserve(tasks, g_k.tcbs)) return false;
     if (tasks > g_scratch_cap) {
         std::size_t cap = g_scratch_cap ? g_scratch_cap : 64;
         while (cap < tasks) cap *= 2;
@@ -156,14 +119,19 @@ bool sched_reserve(std::size_t tasks) {
 using namespace chm::kernel;
 
 extern "C" {
-const chm_sched_ops_t chm_sched_muf_ops = {"muf", muf_admit, muf_retire, rq_enqueue, rq_dequeue,
-                                           rq_pick, muf_before, nullptr, nullptr};
-const chm_sched_ops_t chm_sched_rm_ops = {"rm", admit_any, retire_any, rq_enqueue, rq_dequeue,
-                                          rq_pick, rm_before, nullptr, nullptr};
-const chm_sched_ops_t chm_sched_edf_ops = {"edf", admit_any, retire_any, rq_enqueue, rq_dequeue,
-                                           rq_pick, edf_before, nullptr, nullptr};
-const chm_sched_ops_t chm_sched_mlf_ops = {"mlf", admit_any, retire_any, rq_enqueue, rq_dequeue,
-                                           rq_pick, mlf_before, nullptr, nullptr};
-const chm_sched_ops_t chm_sched_fixed_ops = {"fixed", admit_any, retire_any, rq_enqueue,
-                                             rq_dequeue, rq_pick, fixed_before, nullptr, nullptr};
+const chm_sched_ops_t chm_sched_muf_ops = {"muf", muf_admit, muf_retire,
+                                           rq_enqueue<CHM_SCHED_MUF>, rq_dequeue, rq_pick,
+                                           before<CHM_SCHED_MUF>, nullptr, nullptr};
+const chm_sched_ops_t chm_sched_rm_ops = {"rm", admit_any, retire_any, rq_enqueue<CHM_SCHED_RM>,
+                                          rq_dequeue, rq_pick, before<CHM_SCHED_RM>, nullptr,
+                                          nullptr};
+const chm_sched_ops_t chm_sched_edf_ops = {"edf", admit_any, retire_any,
+                                           rq_enqueue<CHM_SCHED_EDF>, rq_dequeue, rq_pick,
+                                           before<CHM_SCHED_EDF>, nullptr, nullptr};
+const chm_sched_ops_t chm_sched_mlf_ops = {"mlf", admit_any, retire_any,
+                                           rq_enqueue<CHM_SCHED_MLF>, rq_dequeue, rq_pick,
+                                           before<CHM_SCHED_MLF>, nullptr, nullptr};
+const chm_sched_ops_t chm_sched_fixed_ops = {"fixed", admit_any, retire_any,
+                                             rq_enqueue<CHM_SCHED_FIXED>, rq_dequeue, rq_pick,
+                                             before<CHM_SCHED_FIXED>, nullptr, nullptr};
 }

@@ -49,9 +49,9 @@ void fall_back_to_muf(const char* why) {
     g_k.ops = &chm_sched_muf_ops;
     g_k.ops_self = nullptr;
     g_k.policy = CHM_SCHED_MUF;
-    g_k.rq.less.ops = g_k.ops;
+    g_k.builtin = true;
     g_trusted = true;
-    while (g_k.rq.size()) g_k.rq.remove(g_k.rq.top());
+    g_k.rq.clear();
     for (std::uint32_t i = 0; i < g_k.tcb_hw; ++i) {
         Tcb* t = &g_k.tcbs[i];
         if (t->used && t->state != TaskState::Ended) g_k.ops->admit(nullptr, &t->s);
@@ -86,27 +86,21 @@ int sched_select(chm_sched_policy policy, const chm_sched_ops_t* user, void* use
     g_k.ops = ops;
     g_k.ops_self = policy == CHM_SCHED_USER ? user_arg : nullptr;
     g_k.policy = policy;
-    g_k.rq.less.ops = ops;
-    g_k.rq.less.self = nullptr;
+    g_k.builtin = policy != CHM_SCHED_USER;
     g_fallbacks = 0;
     g_reason[0] = 0;
     return 0;
 }
 
-Tcb* sched_pick_locked(std::uint64_t now) {
+Tcb* sched_pick_user_locked(std::uint64_t now) {
     if (g_k.ops->update) g_k.ops->update(g_k.ops_self, now);
     chm_sched_task_t* h = g_k.ops->pick(g_k.ops_self, now);
     if (!h) return nullptr;
     if (!g_trusted && !valid_ready(h)) {
         fall_back_to_muf("returned a task that is not ready");
-        h = g_k.ops->pick(nullptr, now);
-        if (!h) return nullptr;
+        return sched_pick_locked(now);
     }
     return tcb_of(h);
-}
-
-bool sched_before_locked(Tcb* a, Tcb* b, std::uint64_t now) {
-    return g_k.ops->before(g_k.ops_self, &a->s, &b->s, now) != 0;
 }
 
 }  // namespace chm::kernel

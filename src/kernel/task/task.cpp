@@ -283,7 +283,7 @@ int chm_task_set_priority(chm_tid_t id, int priority) {
     t->s.priority = priority;
     if (queued) {
         t->in_ready = true;
-        g_k.ops->enqueue(g_k.ops_self, &t->s, now_cached_locked());
+        sched_enqueue_locked(t);
     }
     if (t->wq) {  // re-sort it among the waiters
         WaitQueue* q = t->wq;

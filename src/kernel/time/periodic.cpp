@@ -1,4 +1,4 @@
-// Task timing: yield, pause until a restart time, periodic cycles on an
+// Task timing: pause until a restart time, periodic cycles on an
 // absolute grid (no drift), and locking a task into the CPU.
 #include <cerrno>
 
@@ -43,13 +43,7 @@ namespace port = chm::port;
 
 extern "C" {
 
-void chm_task_yield(void) {
-    IrqGuard guard;
-    Tcb* cur = g_k.current;
-    if (!cur) return;
-    make_ready_locked(cur);  // behind its equals
-    reschedule_locked();
-}
+// chm_task_yield: core/dispatch.cpp (the dispatcher's fast path).
 
 int chm_task_pause_until(uint64_t restart_ns) {
     IrqGuard guard;

@@ -5,6 +5,8 @@
 
 // This port implements the preemption trampoline (preempt.S).
 #define CHM_PORT_HAS_PREEMPTION 1
+#define CHM_PORT_HAS_SWITCH_SAME_SITE 1  // switch.S: chm_port_switch_same_site
+#define CHM_PORT_HAS_CALL_INDIRECT_RETURN 1  // switch.S: chm_port_call_indirect_return
 
 namespace chm::port {
 
