@@ -40,6 +40,23 @@ enum class TaskState : std::uint8_t {
     Ready, Running, Blocked, Suspended, WaitPeriod, Paused, Ended
 };
 
+// A task's place in MUF's rate-ordered set of non-critical periodic tasks
+// (sched/muf.cpp), or the utilisation it adds to the critical tasks'.
+struct MufNode {
+    Tcb* left = nullptr;
+    Tcb* right = nullptr;
+    Tcb* parent = nullptr;
+    std::uint64_t period = 0, order = 0, util = 0, sum = 0, crit_util = 0;
+    std::uint32_t prio = 0;
+    bool in_tree = false;
+};
+struct MufSet {
+    Tcb* root = nullptr;
+    Tcb* boundary = nullptr;  // first task outside the critical prefix; nullptr: all in
+    std::uint64_t crit_util = 0, order = 0;
+    std::uint32_t rng = 2463534242u;
+};
+
 struct Tcb {
     port::Context ctx;
     chm_sched_task_t s;      // the scheduler's view
@@ -100,6 +117,8 @@ struct Tcb {
     // a waiter's urgency.
     bool boosted = false;
     chm_sched_task_t own;
+
+    MufNode mn;
 
     // Stack (from the stack pool) and entry.
     unsigned char* stack_lo = nullptr;
@@ -170,6 +189,7 @@ struct Kernel {
     bool builtin = true;
     std::uint64_t seq = 0;
     ReadyQueue rq;              // the ready queue of the built-in policies
+    MufSet muf;                 // MUF's critical set (sched/muf.cpp)
 
     // Time.
     TimerHeap timers;
@@ -318,6 +338,9 @@ inline void sched_dequeue_locked(Tcb* t) {
     else g_k.ops->dequeue(g_k.ops_self, &t->s);
 }
 bool sched_reserve(std::size_t tasks);
+// MUF's admit and retire (sched/muf.cpp): keep the critical set.
+int muf_admit(void* self, chm_sched_task_t* t);
+void muf_retire(void* self, chm_sched_task_t* t);
 
 // ---- wait queues (sync/waitq.cpp)
 void waitq_insert_locked(WaitQueue* q, Tcb* t);

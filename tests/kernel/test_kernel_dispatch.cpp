@@ -197,5 +197,137 @@ TEST_F(Dispatch, TheReadyHeapOrdersManyTasksByPriorityThenArrival) {
     }
 }
 
+// ---- MUF's critical set, kept incrementally, against a recomputation
+// from scratch after every admission and retirement: the user-critical
+// tasks, then the other periodic tasks by (period, spawn order) while the
+// utilisation stays <= 1.
+struct Spec {
+    chm_tid_t id;
+    uint64_t period, wcet;
+    int critical;
+    int order;
+};
+void nop(void*) {}
+
+std::vector<chm_tid_t> reference_set(const std::vector<Spec>& live) {
+    constexpr uint64_t one = 1000000000ull;
+    uint64_t util = 0;
+    std::vector<chm_tid_t> in;
+    std::vector<Spec> rest;
+    for (const Spec& s : live) {
+        if (s.critical) {
+            in.push_back(s.id);
+            util += s.wcet * one / s.period;
+        } else {
+            rest.push_back(s);
+        }
+    }
+    std::sort(rest.begin(), rest.end(), [](const Spec& a, const Spec& b) {
+        return a.period != b.period ? a.period < b.period : a.order < b.order;
+    });
+    for (const Spec& s : rest) {
+        const uint64_t u = s.wcet * one / s.period;
+        if (util + u > one) break;
+        util += u;
+        in.push_back(s.id);
+    }
+    std::sort(in.begin(), in.end());
+    return in;
+}
+
+void muf_driver(void*) {
+    const uint64_t far = chm_time_now() + 3600ull * 1000 * kMs;  // never released
+    std::vector<Spec> live;
+    unsigned x = 777;
+    auto rnd = [&x](unsigned n) {
+        x = x * 1103515245u + 12345u;
+        return (x >> 16) % n;
+    };
+    for (int step = 0, order = 0; step < 400; ++step) {
+        if (live.empty() || rnd(3) != 0) {
+            Spec s{CHM_TID_NONE, (1 + rnd(8)) * kMs, 0, rnd(10) == 0, order++};
+            s.wcet = s.period * (1 + rnd(12)) / 100;  // 1-12 % each
+            chm_task_attr_t a;
+            chm_task_attr_init(&a);
+            a.period_ns = s.period;
+            a.wcet_ns = s.wcet;
+            a.critical = s.critical;
+            a.start_ns = far;
+            a.stack_size = 16 * 1024;
+            ASSERT_EQ(chm_task_spawn(&s.id, nop, nullptr, &a), 0);
+            live.push_back(s);
+        } else {
+            const std::size_t i = rnd(unsigned(live.size()));
+            ASSERT_EQ(chm_task_destroy(live[i].id), 0);
+            live.erase(live.begin() + long(i));
+        }
+        std::vector<chm_tid_t> got;
+        for (const Spec& s : live) {
+            chm_task_status_t st;
+            ASSERT_EQ(chm_task_status(s.id, &st), 0);
+            if (st.critical) got.push_back(s.id);
+        }
+        std::sort(got.begin(), got.end());
+        ASSERT_EQ(got, reference_set(live)) << "after step " << step;
+    }
+    for (const Spec& s : live) chm_task_destroy(s.id);
+}
+
+TEST_F(Dispatch, MufCriticalSetMatchesARecomputationAfterEveryChange) {
+    start(CHM_SCHED_MUF, true, 0);
+    spawn(muf_driver, nullptr, "driver", 1, 0, 0, /*critical=*/1);
+    ASSERT_EQ(chm_kernel_run(), 0);
+}
+
+// Flips of queued tasks re-key them in the ready heap: with the driver
+// (critical, aperiodic) locked into the CPU, ready periodic tasks gain and
+// lose membership as others come and go; once it unlocks, exactly the
+// members run before it (they outrank it, it outranks the others).
+std::vector<chm_tid_t> g_first;
+void log_self(void*) {
+    g_first.push_back(chm_task_self());
+    for (;;) chm_task_wait_period();
+}
+
+void muf_queued_driver(void*) {
+    chm_task_lock();
+    std::vector<Spec> live;
+    std::vector<chm_tid_t> extra;
+    for (int i = 0; i < 40; ++i) {
+        Spec s{CHM_TID_NONE, (1 + uint64_t(i % 5)) * kMs, 0, 0, i};
+        s.wcet = s.period * uint64_t(3 + i % 7) / 100;
+        chm_task_attr_t a;
+        chm_task_attr_init(&a);
+        a.period_ns = s.period;
+        a.wcet_ns = s.wcet;
+        a.stack_size = 16 * 1024;
+        ASSERT_EQ(chm_task_spawn(&s.id, log_self, nullptr, &a), 0);  // released now: ready
+        live.push_back(s);
+        if (i % 4 == 3) {  // and a critical one that takes budget away, then leaves
+            a.critical = 1;
+            a.wcet_ns = a.period_ns / 5;
+            chm_tid_t c = CHM_TID_NONE;
+            ASSERT_EQ(chm_task_spawn(&c, log_self, nullptr, &a), 0);
+            if (i % 8 == 3) ASSERT_EQ(chm_task_destroy(c), 0);
+            else extra.push_back(c);
+        }
+    }
+    std::vector<Spec> all = live;
+    for (chm_tid_t c : extra) all.push_back(Spec{c, 1 * kMs, kMs / 5, 1, 0});
+    const std::vector<chm_tid_t> members = reference_set(all);
+    g_first.clear();
+    chm_task_unlock();  // the members run now; the others rank below this driver
+    std::vector<chm_tid_t> ran = g_first;
+    std::sort(ran.begin(), ran.end());
+    EXPECT_EQ(ran, members);
+    for (const Spec& s : all) chm_task_destroy(s.id);
+}
+
+TEST_F(Dispatch, MufMembershipChangesReorderQueuedTasks) {
+    start(CHM_SCHED_MUF, true, 0);
+    spawn(muf_queued_driver, nullptr, "driver", 1, 0, 0, /*critical=*/1);
+    ASSERT_EQ(chm_kernel_run(), 0);
+}
+
 }  // namespace
 }  // namespace chm::test

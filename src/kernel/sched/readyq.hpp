@@ -110,6 +110,7 @@ public:
     bool top_after(const RqKey& k) const { return less(node(k, 0), nodes_[0]); }
     Tcb* at(std::size_t i) const;
     std::size_t size() const { return size_; }
+    bool contains(const Tcb* t) const;
     void clear() { size_ = 0; }
 
 private:

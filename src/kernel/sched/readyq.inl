@@ -11,7 +11,7 @@ inline bool ReadyQueue::reserve(std::size_t n, Tcb* base) {
     if (!slot_) {
         // One slot per possible TCB: 128 KiB of address space, touched only
         // as deep as TCB indexes go.
-        slot_ = static_cast<std::int32_t*>(std::malloc(kMaxTasks * sizeof(std::int32_t)));
+        slot_ = static_cast<std::int32_t*>(std::calloc(kMaxTasks, sizeof(std::int32_t)));
         if (!slot_) return false;
     }
     if (n <= cap_) return true;
@@ -26,6 +26,12 @@ inline bool ReadyQueue::reserve(std::size_t n, Tcb* base) {
 
 inline Tcb* ReadyQueue::top() const { return size_ ? base_ + nodes_[0].idx : nullptr; }
 inline Tcb* ReadyQueue::at(std::size_t i) const { return base_ + nodes_[i].idx; }
+
+inline bool ReadyQueue::contains(const Tcb* t) const {
+    if (!slot_) return false;
+    const std::int32_t i = slot_[t->index];
+    return i >= 0 && std::size_t(i) < size_ && nodes_[i].idx == t->index;
+}
 
 inline void ReadyQueue::push(Tcb* t, const RqKey& k) {
     sift_up(size_++, node(k, t->index));

@@ -52,6 +52,7 @@ void fall_back_to_muf(const char* why) {
     g_k.builtin = true;
     g_trusted = true;
     g_k.rq.clear();
+    g_k.muf = MufSet{};
     for (std::uint32_t i = 0; i < g_k.tcb_hw; ++i) {
         Tcb* t = &g_k.tcbs[i];
         if (t->used && t->state != TaskState::Ended) g_k.ops->admit(nullptr, &t->s);
