@@ -241,6 +241,9 @@ void timer_cancel_locked(TimerNode* n);
 bool timers_run_locked(std::uint64_t now);
 // Program the port timer for the earliest of the timer heap and quantum.
 void timer_program_locked(std::uint64_t now);
+// The timer signal came: what is armed now (a repeating timer re-armed
+// itself; a one-shot is spent).
+void timer_fired_locked(std::uint64_t now);
 std::uint64_t next_due_locked();
 
 // ---- dispatching (core/dispatch.cpp)

@@ -299,6 +299,9 @@ void preempted_from_trampoline() {
 // A tick that landed while the mask was held; runs with the mask held.
 void pending_tick() {
     const std::uint64_t now = now_locked();
+    // It may be the port's own retry (a deferred preemption) that fired,
+    // not what the kernel armed: forget a one-shot (re-armed below).
+    timer_fired_locked(now);
     irq_dispatch_locked();
     timers_run_locked(now);
     timer_program_locked(now);
@@ -312,7 +315,7 @@ bool tick_from_signal(std::uint64_t now) {
     ++g_k.ticks;
     g_k.now_cache = now;
     if (!g_k.cfg.cpu_accounting) charge_current_locked(now);  // statistical
-    g_k.armed_at = 0;
+    timer_fired_locked(now);
     irq_dispatch_locked();
     timers_run_locked(now);
     timer_program_locked(now);

@@ -62,8 +62,8 @@ int idle_loop_locked() {
         port::idle_wait_locked(g_k.cfg.idle_poll_ns);
         if (port::g_irq.pending) {
             port::g_irq.pending = 0;
-            g_k.armed_at = 0;
             const std::uint64_t t = now_locked();
+            timer_fired_locked(t);
             timers_run_locked(t);
             timer_program_locked(t);
         }
@@ -131,6 +131,10 @@ int chm_kernel_run(void) {
     g_k.running = true;
     const int r = idle_loop_locked();
     g_k.running = false;
+    if (!g_k.cfg.virtual_clock && port::timer_interval()) {  // no ticks for a stopped kernel
+        port::timer_arm_locked(0);
+        g_k.armed_at = 0;
+    }
     port::irq_restore();
     return r;
 }

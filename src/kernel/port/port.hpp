@@ -170,9 +170,14 @@ using TickHandler = bool (*)(std::uint64_t now);
 // Returns 0 or -errno. Call once, on the kernel thread, before any timer_arm.
 int timer_init(TickHandler handler);
 
-// Arm the one-shot timer for absolute monotonic time `at_ns` (0 disarms).
-// Replaces any earlier setting. Task or kernel context, mask held.
-void timer_arm_locked(std::uint64_t at_ns);
+// Arm the timer for absolute monotonic time `at_ns` (0 disarms); with
+// `interval_ns`, it fires again every interval after that until re-armed
+// (the kernel's guess of the next event: it then needs no system call to
+// re-arm after the tick). Replaces any earlier setting. Task or kernel
+// context, mask held.
+void timer_arm_locked(std::uint64_t at_ns, std::uint64_t interval_ns = 0);
+// The interval of the last arming (0: one-shot or disarmed).
+std::uint64_t timer_interval();
 
 // Tear the timer down (process exit, tests).
 void timer_fini();

@@ -9,6 +9,7 @@ namespace chm::kernel {
 
 namespace {
 constexpr std::uint64_t kArmSlackNs = 1000;  // far below a timer signal's latency
+constexpr std::uint64_t kMinRepeatNs = 50000;  // shortest interval worth repeating
 }  // namespace
 
 void timer_add_locked(TimerNode* n, std::uint64_t due) {
@@ -64,21 +65,60 @@ bool timers_run_locked(std::uint64_t now) {
     return fired;
 }
 
+namespace {
+
+// What follows the event at `due` (the top of the timer heap), as far as
+// one look can tell: a release creates its cycle's deadline (deadline + 1
+// later), a deadline is followed by the next cycle's (a period later).
+// Armed as the timer's interval, so the tick that releases a periodic set
+// finds the timer already set for what comes next: no system call.
+std::uint64_t next_gap_guess(std::uint64_t due) {
+    const TimerNode* top = g_k.timers.top();
+    if (!top || top->due != due || !top->owner) return 0;
+    const chm_sched_task_t& s = top->owner->s;
+    std::uint64_t gap = 0;
+    if (top->kind == TimerKind::Release) gap = s.deadline_ns + 1;
+    if (top->kind == TimerKind::Deadline) gap = s.period_ns;
+    return gap >= kMinRepeatNs ? gap : 0;  // never a storm of ticks
+}
+
+}  // namespace
+
 void timer_program_locked(std::uint64_t now) {
     if (g_k.cfg.virtual_clock) return;
     const std::uint64_t due = next_due_locked();
-    if (!due) return;
+    const bool repeating = port::timer_interval() != 0;
+    if (!due) {
+        if (repeating) {  // nothing to wait for: stop a repeating timer
+            port::timer_arm_locked(0);
+            g_k.armed_at = 0;
+        }
+        return;
+    }
     // Re-arm only when the new event is earlier than what is armed: a later
     // one is found by the (then early) tick, which saves a system call on
     // most kernel operations. An event at most kArmSlackNs earlier rides on
     // the armed tick: a periodic task's next release lies 1 ns before the
     // deadline the tick armed, and re-arming for it cost a timer_settime
     // (several µs on a virtual machine) in front of every other task
-    // released with it.
-    if (g_k.armed_at == 0 || g_k.armed_at <= now || due + kArmSlackNs < g_k.armed_at) {
-        port::timer_arm_locked(due);
+    // released with it. A repeating timer is re-armed for a later event
+    // too, so it never ticks on for nothing.
+    const bool stale = g_k.armed_at == 0 || g_k.armed_at <= now;
+    const bool too_late = due + kArmSlackNs < g_k.armed_at;
+    const bool too_early = repeating && g_k.armed_at + kArmSlackNs < due;
+    if (stale || too_late || too_early) {
+        port::timer_arm_locked(due, next_gap_guess(due));
         g_k.armed_at = due;
     }
+}
+
+void timer_fired_locked(std::uint64_t now) {
+    const std::uint64_t every = port::timer_interval();
+    if (!every || !g_k.armed_at) {
+        g_k.armed_at = 0;  // a one-shot fired (or a retry replaced it): nothing armed
+        return;
+    }
+    while (g_k.armed_at <= now) g_k.armed_at += every;  // it fires again by itself
 }
 
 }  // namespace chm::kernel

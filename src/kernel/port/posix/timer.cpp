@@ -27,6 +27,7 @@ std::uint32_t g_stray = 0;
 // initial-exec: no lazy TLS allocation inside the handler.
 __attribute__((tls_model("initial-exec"))) thread_local bool t_kernel_thread = false;
 
+std::uint64_t g_interval = 0;  // of the last timer_arm_locked (kernel thread only)
 std::uint32_t g_deferred = 0;
 unsigned g_defer_streak = 0;  // consecutive deferrals: backs the retry off
 
@@ -140,20 +141,28 @@ int timer_init(TickHandler handler) {
     return 0;
 }
 
-void timer_arm_locked(std::uint64_t at_ns) {
+void timer_arm_locked(std::uint64_t at_ns, std::uint64_t interval_ns) {
     if (!g_timer_live) return;
     itimerspec its{};
     if (at_ns != 0) {
         its.it_value.tv_sec = time_t(at_ns / 1000000000u);
         its.it_value.tv_nsec = long(at_ns % 1000000000u);
+        its.it_interval.tv_sec = time_t(interval_ns / 1000000000u);
+        its.it_interval.tv_nsec = long(interval_ns % 1000000000u);
+    } else {
+        interval_ns = 0;
     }
+    g_interval = interval_ns;
     timer_settime(g_timer, TIMER_ABSTIME, &its, nullptr);
 }
+
+std::uint64_t timer_interval() { return g_interval; }
 
 void timer_fini() {
     if (!g_timer_live) return;
     timer_delete(g_timer);
     g_timer_live = false;
+    g_interval = 0;
     g_tick = nullptr;
     t_kernel_thread = false;
     g_kernel_tid = 0;
