@@ -1,7 +1,9 @@
 /* Chimera scheduler interface: the operations table every scheduling policy
  * implements, the built-in ones (RM, EDF, MLF, MUF, fixed priority) and a
- * user scheduler installed at start-up alike. The kernel calls only these
- * operations; it has no special case for any policy.
+ * user scheduler installed at start-up alike. A user scheduler is called
+ * only through these operations; under a built-in policy the kernel runs
+ * the same operations' code directly (no indirect call per switch). A
+ * built-in table installed as a user scheduler behaves like the built-in.
  *
  * All operations run with the kernel's interrupt mask held: they must not
  * block, allocate, call the C library or the Chimera API. */
