@@ -5,10 +5,13 @@
 // ready heap orders many tasks exactly (priority, then arrival) through
 // set_priority changes. Virtual clock: exact, no sleeping.
 #include <algorithm>
+#include <chrono>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "kernel_fixture.hpp"
+#include "port.hpp"
 
 namespace chm::test {
 namespace {
@@ -327,6 +330,51 @@ TEST_F(Dispatch, MufMembershipChangesReorderQueuedTasks) {
     start(CHM_SCHED_MUF, true, 0);
     spawn(muf_queued_driver, nullptr, "driver", 1, 0, 0, /*critical=*/1);
     ASSERT_EQ(chm_kernel_run(), 0);
+}
+
+// ---- real clock: a port retry (deferred preemption) that replaced the
+// kernel's armed timer and fired while the mask was held. The kernel must
+// not go on believing its own event armed: it idled until something else
+// woke it (here a ring after 400 ms; in tests/errors, for ever).
+int g_ticks = 0;
+void ticker(void*) {
+    for (int i = 0; i < 5; ++i) {
+        ++g_ticks;
+        chm_task_wait_period();
+    }
+}
+void retry_maker(void*) {
+    chm_task_pause_until(chm_time_now() + 2 * kMs);  // the ticker waits for its release
+    port::irq_disable();
+    port::g_irq.pending = 1;        // a tick came while masked...
+    port::irq_restore_no_switch();  // ...and is re-delivered by a retry in 20 us
+    port::irq_disable();
+    const uint64_t end = port::now_ns() + 300 * kUs;
+    while (port::now_ns() < end) {  // the retry fires now, mask held
+    }
+    port::irq_restore();  // the pending tick is taken here
+}
+
+TEST_F(Dispatch, APortRetryFiredUnderTheMaskLeavesNoStaleTimer) {
+    start(CHM_SCHED_FIXED, /*virtual_clock=*/false);
+    g_ticks = 0;
+    chm_task_attr_t a;
+    chm_task_attr_init(&a);
+    a.period_ns = 20 * kMs;
+    a.priority = 2;
+    ASSERT_EQ(chm_task_spawn(nullptr, ticker, nullptr, &a), 0);
+    spawn(retry_maker, nullptr, "retry", 1);
+    std::thread rescue([] {  // ends a lost-tick idle, so a failure does not hang
+        std::this_thread::sleep_for(std::chrono::milliseconds(400));
+        port::idle_wake();
+    });
+    const auto t0 = std::chrono::steady_clock::now();
+    ASSERT_EQ(chm_kernel_run(), 0);
+    const auto ms = std::chrono::duration_cast<std::chrono::milliseconds>(
+                        std::chrono::steady_clock::now() - t0).count();
+    rescue.join();
+    EXPECT_EQ(g_ticks, 5);
+    EXPECT_LT(ms, 300) << "5 cycles of 20 ms took " << ms << " ms: a release was lost";
 }
 
 }  // namespace
