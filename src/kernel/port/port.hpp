@@ -294,6 +294,8 @@ std::uint32_t doorbell_take();
 // timer signal, or nothing while it polls). Any thread or process; async-
 // signal-safe.
 void doorbell_ring(const Doorbell& db, std::uint32_t bits, int pid, int tid);
+// How many directed signals this process's rings have sent (statistics).
+std::uint32_t doorbell_signals_sent();
 
 // ------------------------------------------------------------------ idle
 

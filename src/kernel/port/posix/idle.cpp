@@ -19,6 +19,7 @@ namespace {
 std::uint32_t g_own_pending = 0, g_own_seq = 0, g_own_state = kDbRunning;
 const Doorbell kOwnDoorbell{&g_own_pending, &g_own_seq, &g_own_state, false};
 Doorbell g_db = kOwnDoorbell;
+std::uint32_t g_signals_sent = 0;  // 32-bit: a 64-bit atomic is a libatomic call on m68k
 
 std::uint32_t load(const std::uint32_t* w) { return __atomic_load_n(w, __ATOMIC_SEQ_CST); }
 void store(std::uint32_t* w, std::uint32_t v) { __atomic_store_n(w, v, __ATOMIC_SEQ_CST); }
@@ -55,10 +56,15 @@ void doorbell_ring(const Doorbell& db, std::uint32_t bits, int pid, int tid) {
     case kDbPolling:
         break;  // it sees `pending` or `seq` change within its poll
     default:    // running tasks, or asleep in ppoll: interrupt it
-        if (tid > 0) syscall(SYS_tgkill, pid, tid, timer_signal());
+        if (tid > 0) {
+            syscall(SYS_tgkill, pid, tid, timer_signal());
+            __atomic_fetch_add(&g_signals_sent, 1, __ATOMIC_RELAXED);
+        }
         break;
     }
 }
+
+std::uint32_t doorbell_signals_sent() { return __atomic_load_n(&g_signals_sent, __ATOMIC_RELAXED); }
 
 void idle_wait_locked(std::uint64_t poll_ns) {
     const std::uint32_t seen = load(g_db.seq);
