@@ -251,6 +251,27 @@ def curve(ax, xs, d, label, fmt="o-"):
     ax.errorbar(x, med, yerr=err, fmt=fmt, capsize=3, label=label, markersize=4)
 
 
+def lateness_markdown(samples_dir):
+    """A table of every periodic loop's release lateness: p50, p99, p99.9, max."""
+    lat = sorted(Path(samples_dir).glob("*lateness*.txt")) if samples_dir else []
+    rows = []
+    for f in lat:
+        ns = sorted(float(x) for x in f.read_text().split())
+        if not ns:
+            continue
+        q = lambda p: ns[min(len(ns) - 1, int(p * (len(ns) - 1) + 0.5))]
+        rows.append(f"| `{f.stem}` | {len(ns)} | {human(q(0.5), 'ns')} | {human(q(0.99), 'ns')} | "
+                    f"{human(q(0.999), 'ns')} | {human(ns[-1], 'ns')} |")
+    if not rows:
+        return []
+    return ["## Release lateness of the 1 kHz loops", "",
+            "Every sampled period of each loop in this run (the rows above give the p99 "
+            "over repeated runs; a period that began a whole period late counts as missed, "
+            "as in the peer, and is not sampled).", "",
+            "| loop | periods | p50 | p99 | p99.9 | max |",
+            "| --- | ---: | ---: | ---: | ---: | ---: |", *rows, ""]
+
+
 def plots(rows, samples_dir, outdir, exps=None):
     """PNG figures; returns (file name, caption) pairs. Needs matplotlib."""
     try:
@@ -462,6 +483,7 @@ def main():
         ran = " ".join(shlex.quote(c) for c in cmd).replace(tmp, "$TMP")
         md = markdown(rows, rest, machine(), (invoked, ran), args.quick, elapsed)
         md.extend(experiment_markdown(exps))
+        md.extend(lateness_markdown(samples))
         if made:
             md.extend(["## Plots", ""])
             rel = os.path.relpath(plot_dir, md_path.parent)
