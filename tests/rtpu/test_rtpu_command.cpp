@@ -52,6 +52,14 @@ TEST_F(RtpuTest, ChimeraStartStatusStopRmRoundTrip) {
     EXPECT_TRUE(contains(r.out, "RTPU 1 (pid")) << r.out;
     EXPECT_TRUE(contains(r.out, "RTPU 2 (pid")) << r.out;
     EXPECT_FALSE(contains(r.out, "killed")) << r.out;
+    // "stopped" means the process is gone (at most a zombie), not only its slot.
+    for (std::size_t at = r.out.find("(pid "); at != std::string::npos; at = r.out.find("(pid ", at + 1)) {
+        const int pid = std::atoi(r.out.c_str() + at + 5);
+        const std::string stat = read_file("/proc/" + std::to_string(pid) + "/stat");
+        const std::size_t close = stat.rfind(')');
+        EXPECT_TRUE(stat.empty() || (close != std::string::npos && stat.compare(close + 2, 1, "Z") == 0))
+            << "pid " << pid << " still runs after chimera stop: " << stat;
+    }
     EXPECT_TRUE(wait_text(probe, "hook")) << read_file(probe);  // shutdown hooks ran
     EXPECT_TRUE(contains(read_file(bp_ + ".rtpu2.log"), "stopped by")) << read_file(bp_ + ".rtpu2.log");
 

@@ -149,11 +149,13 @@ int stop_attached(double timeout_s, bool quiet) {
         int slot, pid;
         std::uint32_t gen;
         bool done;
+        std::uint64_t start;  // the process's start time: pid reuse is not "alive"
     };
     std::vector<Victim> v;
     for (std::uint32_t s = 0; s < st.slots; ++s)
         if (is_rtpu(st.slot[s]) && st.slot[s].pid > 0) {
-            v.push_back({int(s), st.slot[s].pid, st.slot[s].generation, false});
+            v.push_back({int(s), st.slot[s].pid, st.slot[s].generation, false,
+                         chm::bp::proc_start_time(st.slot[s].pid)});
             kill(st.slot[s].pid, SIGTERM);
         }
     // Gone: the slot no longer holds that generation in a live state.
@@ -172,6 +174,12 @@ int stop_attached(double timeout_s, bool quiet) {
             if (!x.done) all = all && (x.done = gone(x));
         if (all || mono_ms() >= end) break;
         nap_ms(10);
+    }
+    // The slot is left just before the process exits: wait (bounded) for
+    // the exit too, so that "stopped" means no such process runs.
+    for (const Victim& x : v) {
+        const std::uint64_t pend = mono_ms() + 2000;
+        while (x.done && chm::bp::proc_alive(x.pid, x.start) && mono_ms() < pend) nap_ms(5);
     }
     int killed = 0;
     for (Victim& x : v) {
