@@ -29,6 +29,7 @@
 #include "ipc/xmail/xmail.hpp"
 #include "port.hpp"
 #include "realtime.hpp"
+#include "../parse_num.hpp"
 
 namespace {
 
@@ -86,11 +87,8 @@ struct Options {
 }
 
 bool parse_int(const char* s, int* out) {
-    if (!s || !*s) return false;
-    char* end = nullptr;
-    errno = 0;
-    const long v = std::strtol(s, &end, 10);
-    if (errno || *end || v < 0 || v > 1000000) return false;
+    long v = 0;
+    if (!chimera_tools::parse_num(s, 0, 1000000, &v)) return false;
     *out = int(v);
     return true;
 }

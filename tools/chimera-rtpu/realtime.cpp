@@ -7,18 +7,10 @@
 #include <sched.h>
 #include <sys/mman.h>
 
+#include "../parse_num.hpp"
+
 namespace chimera_rtpu {
 namespace {
-
-bool parse_long(const char* s, long lo, long hi, long* out) {
-    if (!s || !*s) return false;
-    char* end = nullptr;
-    errno = 0;
-    const long v = std::strtol(s, &end, 10);
-    if (errno || *end || v < lo || v > hi) return false;
-    *out = v;
-    return true;
-}
 
 std::string os_error(const std::string& what, int err, const char* hint = "") {
     return what + ": " + std::strerror(err) + hint;
@@ -29,7 +21,7 @@ std::string os_error(const std::string& what, int err, const char* hint = "") {
 std::string parse_fifo_priority(const char* s, int* out) {
     const long hi = sched_get_priority_max(SCHED_FIFO);
     long v = 0;
-    if (!parse_long(s, 1, hi, &v))
+    if (!chimera_tools::parse_num(s, 1, hi, &v))
         return "--rt-priority wants a SCHED_FIFO priority 1.." + std::to_string(hi) + ", not \"" + s + "\"";
     *out = int(v);
     return "";
@@ -37,7 +29,7 @@ std::string parse_fifo_priority(const char* s, int* out) {
 
 std::string parse_cpu(const char* s, int* out) {
     long v = 0;
-    if (!parse_long(s, 0, CPU_SETSIZE - 1, &v)) return std::string("--cpu wants a CPU number, not \"") + s + "\"";
+    if (!chimera_tools::parse_num(s, 0, CPU_SETSIZE - 1, &v)) return std::string("--cpu wants a CPU number, not \"") + s + "\"";
     cpu_set_t allowed;
     CPU_ZERO(&allowed);
     if (sched_getaffinity(0, sizeof allowed, &allowed) == 0 && !CPU_ISSET(int(v), &allowed))

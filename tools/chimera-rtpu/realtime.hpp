@@ -17,9 +17,9 @@ struct HostRealtime {
 std::string parse_fifo_priority(const char* s, int* out);
 std::string parse_cpu(const char* s, int* out);
 
-// Apply them to the calling process: "" when done, else a message naming
-// the option and what the OS said (nothing is applied partly: an option
-// that fails leaves the ones before it in force and the caller exits).
+// Apply them to the calling process (CPU, then memory, then priority): ""
+// when done, else a message naming the option and what the OS said. An
+// option that fails leaves the ones before it in force; the caller exits.
 std::string apply(const HostRealtime& rt);
 
 }  // namespace chimera_rtpu

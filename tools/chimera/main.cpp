@@ -31,8 +31,10 @@
 #include "chimera/bp.h"
 #include "chimera/rtpu.h"
 #include "cmd.hpp"
+#include "../parse_num.hpp"
 
 using namespace chimera_cmd;
+using chimera_tools::parse_num;
 
 namespace {
 
@@ -73,16 +75,6 @@ struct StartPlan {
     bool log_terminal = false;
     std::vector<std::vector<std::string>> programs;  // per RTPU: chimera-rtpu's program arguments
 };
-
-bool parse_num(const char* s, long lo, long hi, long* out) {
-    if (!s || !*s) return false;
-    char* end = nullptr;
-    errno = 0;
-    const long v = std::strtol(s, &end, 10);
-    if (errno || *end || v < lo || v > hi) return false;
-    *out = v;
-    return true;
-}
 
 // "RTPU:PATH[:ARG...]": path made absolute (the RTPU may not share our
 // working directory for long), arguments split at ':'.
