@@ -163,6 +163,10 @@ struct Report {
     unsigned problems = 0;
     void problem(const char* fmt, ...) __attribute__((format(printf, 2, 3)));
 };
+// A lock's part of the strict checks: held by a dead owner, or free but
+// dirty, is a problem named `what`.
+void check_lock(const View& v, const Lock& l, const char* what, Report& r);
+
 // Strict consistency check of one arena (read-only). `name` prefixes lines.
 void arena_check(const View& v, const ArenaHeader* a, std::uint32_t off, std::uint32_t size,
                  const char* name, Report& r);

@@ -18,16 +18,6 @@ const char* state_name(std::uint32_t s) {
     return s < kStateCount ? kNames[s] : "?";
 }
 
-void check_lock(const View& v, const Lock& l, const char* what, Report& r) {
-    const std::uint32_t t = l.token.load(R);
-    if (t == 0) {
-        if (l.dirty.load(R)) r.problem("%s.dirty is set on a free lock", what);
-        return;
-    }
-    if (!token_alive(v, t, true))
-        r.problem("%s: held by a dead owner (token 0x%08x: slot %u generation %u%s)", what, t, token_slot(t),
-                  token_gen(t), token_recovery(t) ? ", recovery" : "");
-}
 
 void check_table(const View& v, Report& r, Summary* sum) {
     char what[64];
@@ -154,6 +144,17 @@ void check_registry(const View& v, Report& r, Summary* sum) {
 }
 
 }  // namespace
+
+void check_lock(const View& v, const Lock& l, const char* what, Report& r) {
+    const std::uint32_t t = l.token.load(R);
+    if (t == 0) {
+        if (l.dirty.load(R)) r.problem("%s.dirty is set on a free lock", what);
+        return;
+    }
+    if (!token_alive(v, t, true))
+        r.problem("%s: held by a dead owner (token 0x%08x: slot %u generation %u%s)", what, t, token_slot(t),
+                  token_gen(t), token_recovery(t) ? ", recovery" : "");
+}
 
 void Report::problem(const char* fmt, ...) {
     ++problems;

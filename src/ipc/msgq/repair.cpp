@@ -11,6 +11,7 @@
 // add up) marks the queue broken: later calls get -ENOTRECOVERABLE.
 #include <atomic>
 #include <cerrno>
+#include <cstdio>
 
 #include "ipc/msgq/msgq.hpp"
 
@@ -224,9 +225,9 @@ void check_queue(const bp::View& v, const QueueHeader* cq, std::uint32_t payload
     if (q->magic.load(R) != kMagic) return rep.problem("%s: no queue magic (creator died while creating?)", name);
     if (!geometry_ok(q, payload_size)) return rep.problem("%s: header geometry inconsistent", name);
     if (q->broken.load(R)) return rep.problem("%s: marked broken", name);
-    const std::uint32_t tok = q->lock.token.load(R);
-    if (tok && !bp::token_alive(v, tok, true)) rep.problem("%s: lock held by a dead owner (token %08x)", name, tok);
-    if (!tok && q->lock.dirty.load(R)) rep.problem("%s: lock free but dirty", name);
+    char what[160];
+    std::snprintf(what, sizeof what, "%s.lock", name);
+    bp::check_lock(v, q->lock, what, rep);
     // Every list: in range, QUEUED, on its level, in order, tail right.
     const Age age{q->next_seq.load(R), q->order == kLifo};
     std::uint32_t seen = 0, bytes = 0, mask = 0;

@@ -6,6 +6,7 @@
 #include <cerrno>
 #include <climits>
 #include <cstdint>
+#include <cstdio>
 
 #include "chimera/rsem.h"
 #include "chimera/shm.h"
@@ -165,8 +166,9 @@ void rsem_check(const View& v, std::uint32_t off, std::uint32_t size, const char
     if (s->broken.load(R)) r.problem("%s: marked broken", name);
     const std::uint32_t tok = s->lock.token.load(R);
     if (tok && bp::token_alive(v, tok, true)) return;  // a live holder may be mid-change
-    if (tok) r.problem("%s: lock held by a dead owner (token %08x)", name, tok);
-    if (!tok && s->lock.dirty.load(R)) r.problem("%s: lock free but dirty", name);
+    char what[160];
+    std::snprintf(what, sizeof what, "%s.lock", name);
+    check_lock(v, s->lock, what, r);
     const std::uint32_t count = s->count.load(R);
     if (kind == CHM_SEM_BINARY && count > 1) r.problem("%s: binary, count %u", name, count);
     std::uint32_t waiting = 0;
