@@ -8,13 +8,13 @@
 #include <exception>
 #include <stdexcept>
 
+#include "../kernel/kbench.hpp"
 #include "ipc/wake/wake.hpp"
 
 namespace chm::bench::ipcb {
 
 namespace {
 
-std::exception_ptr g_failure;
 int g_work = 0;                  // spawned tasks that have not returned yet
 std::uint64_t g_deadline_ns = 0; // child: stop after this (0: never)
 int g_parent = 0;                // child: stop when this process is gone
@@ -28,45 +28,22 @@ void guard_task(void*) {
         if (g_parent) {
             if (getppid() != g_parent || (g_deadline_ns && mono_ns() > g_deadline_ns)) chm_kernel_stop(0);
         } else if (const char* why = abort_reason()) {
-            if (!g_failure) g_failure = std::make_exception_ptr(std::runtime_error(why));
-            chm_kernel_stop(-1);
+            kb::Kernel::store_failure(std::make_exception_ptr(std::runtime_error(why)));
+            kb::Kernel::stop_failed();
         }
     }
 }
 
 void run_work(void* p) {
-    bool failed = false;
-    try {
-        (*static_cast<std::function<void()>*>(p))();
-    } catch (...) {
-        if (!g_failure) g_failure = std::current_exception();
-        failed = true;
-    }
-    // Stopping switches away for good: never from inside a catch block.
-    if (failed) chm_kernel_stop(-1);
+    kb::guarded([p] { (*static_cast<std::function<void()>*>(p))(); });
     if (--g_work == 0) chm_kernel_stop(0);
 }
 
-void run_endless(void* p) {
-    bool failed = false;
-    try {
-        (*static_cast<std::function<void()>*>(p))();
-    } catch (...) {
-        if (!g_failure) g_failure = std::current_exception();
-        failed = true;
-    }
-    if (failed) chm_kernel_stop(-1);
-}
-
-chm_tid_t spawn_raw(void (*fn)(void*), void* arg, int priority, const char* name) {
-    chm_task_attr_t a;
-    chm_task_attr_init(&a);
-    a.priority = priority;
-    a.name = name;
-    chm_tid_t id = CHM_TID_NONE;
-    if (const int e = chm_task_spawn(&id, fn, arg, &a))
-        throw std::runtime_error("chm_task_spawn: error " + std::to_string(e));
-    return id;
+kb::TaskSpec spec(int priority, const char* name) {
+    kb::TaskSpec t;
+    t.priority = priority;
+    t.name = name;
+    return t;
 }
 
 }  // namespace
@@ -116,7 +93,7 @@ Kernel::Kernel(int slot, std::uint64_t idle_poll_ns, std::uint64_t deadline_ns, 
     cfg.quantum_ns = 0;
     cfg.rtpu_id = slot;
     cfg.idle_poll_ns = idle_poll_ns;
-    g_failure = nullptr;
+    kb::Kernel::forget_failure();
     g_work = 0;
     g_deadline_ns = deadline_ns;
     g_parent = parent;
@@ -128,7 +105,7 @@ Kernel::Kernel(int slot, std::uint64_t idle_poll_ns, std::uint64_t deadline_ns, 
     }
     bound_ = true;
     try {
-        spawn_raw(guard_task, nullptr, kGuardPriority, "guard");
+        kb::spawn(guard_task, nullptr, spec(kGuardPriority, "guard"));
     } catch (...) {
         chm::ipc::wake_unbind_kernel();
         chm_kernel_fini();
@@ -142,23 +119,15 @@ Kernel::~Kernel() {
 }
 
 void Kernel::spawn(std::function<void()>* fn, int priority, const char* name) {
-    spawn_raw(run_work, fn, priority, name);
+    kb::spawn(run_work, fn, spec(priority, name));
     ++g_work;
 }
 
 void Kernel::spawn_endless(std::function<void()>* fn, int priority, const char* name) {
-    spawn_raw(run_endless, fn, priority, name);
+    kb::spawn_fn(fn, spec(priority, name));  // guarded, not counted
 }
 
-void Kernel::run() {
-    const int r = chm_kernel_run();
-    if (g_failure) {
-        std::exception_ptr e = g_failure;
-        g_failure = nullptr;
-        std::rethrow_exception(e);
-    }
-    if (r != 0) throw std::runtime_error("chm_kernel_run returned " + std::to_string(r));
-}
+void Kernel::run() { kb::Kernel::run_and_rethrow(); }
 
 std::unique_ptr<Child> rtpu_child(int cpu, const std::string& path, int slot,
                                   std::uint64_t idle_poll_ns, double limit_s,

@@ -27,7 +27,7 @@ Kernel::Kernel(const KernelOpts& o) {
 
 Kernel::~Kernel() { chm_kernel_fini(); }
 
-void Kernel::run() {
+void Kernel::run_and_rethrow() {
     const int r = chm_kernel_run();
     if (g_failure) {
         std::exception_ptr e = g_failure;
@@ -37,8 +37,12 @@ void Kernel::run() {
     if (r != 0) throw std::runtime_error("chm_kernel_run returned " + std::to_string(r));
 }
 
-void Kernel::store_current_exception() {
-    if (!g_failure) g_failure = std::current_exception();
+void Kernel::forget_failure() { g_failure = nullptr; }
+
+void Kernel::store_current_exception() { store_failure(std::current_exception()); }
+
+void Kernel::store_failure(std::exception_ptr e) {
+    if (!g_failure) g_failure = e;
 }
 
 void Kernel::stop_failed() { chm_kernel_stop(-1); }

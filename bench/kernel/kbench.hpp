@@ -34,10 +34,16 @@ public:
     Kernel(const Kernel&) = delete;
     Kernel& operator=(const Kernel&) = delete;
     // chm_kernel_run, then rethrow what a task caught (see guarded()).
-    void run();
-    // Record the exception in flight (from a catch block in a task), then,
-    // outside the catch block, stop the kernel.
+    void run() { run_and_rethrow(); }
+    // The same for a kernel initialised elsewhere (the backplane rows'
+    // RTPUs, bench/ipc/rtpu.cpp), which start with forget_failure().
+    static void run_and_rethrow();
+    static void forget_failure();
+    // Record a failure (the first one wins): the exception in flight (from
+    // a catch block in a task), or one made by the caller; then, outside
+    // the catch block, stop the kernel.
     static void store_current_exception();
+    static void store_failure(std::exception_ptr e);
     static void stop_failed();
 };
 
