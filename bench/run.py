@@ -251,16 +251,19 @@ def curve(ax, xs, d, label, fmt="o-"):
     ax.errorbar(x, med, yerr=err, fmt=fmt, capsize=3, label=label, markersize=4)
 
 
-def lateness_markdown(samples_dir):
-    """A table of every periodic loop's release lateness: p50, p99, p99.9, max."""
+def lateness_samples(samples_dir):
+    """Every periodic loop's release lateness samples (ns, sorted), by loop."""
     lat = sorted(Path(samples_dir).glob("*lateness*.txt")) if samples_dir else []
+    loops = {f.stem: sorted(float(x) for x in f.read_text().split()) for f in lat}
+    return {name: ns for name, ns in loops.items() if ns}
+
+
+def lateness_markdown(loops):
+    """A table of every periodic loop's release lateness: p50, p99, p99.9, max."""
     rows = []
-    for f in lat:
-        ns = sorted(float(x) for x in f.read_text().split())
-        if not ns:
-            continue
+    for name, ns in loops.items():
         q = lambda p: ns[min(len(ns) - 1, int(p * (len(ns) - 1) + 0.5))]
-        rows.append(f"| `{f.stem}` | {len(ns)} | {human(q(0.5), 'ns')} | {human(q(0.99), 'ns')} | "
+        rows.append(f"| `{name}` | {len(ns)} | {human(q(0.5), 'ns')} | {human(q(0.99), 'ns')} | "
                     f"{human(q(0.999), 'ns')} | {human(ns[-1], 'ns')} |")
     if not rows:
         return []
@@ -272,7 +275,7 @@ def lateness_markdown(samples_dir):
             "| --- | ---: | ---: | ---: | ---: | ---: |", *rows, ""]
 
 
-def plots(rows, samples_dir, outdir, exps=None):
+def plots(rows, lateness, outdir, exps=None):
     """PNG figures; returns (file name, caption) pairs. Needs matplotlib."""
     try:
         import matplotlib
@@ -284,23 +287,23 @@ def plots(rows, samples_dir, outdir, exps=None):
     outdir.mkdir(parents=True, exist_ok=True)
     made = []
 
+    def save(fig, name, caption):
+        fig.tight_layout()
+        fig.savefig(outdir / name, dpi=110)
+        plt.close(fig)
+        made.append((name, caption))
+
     # Release lateness of every periodic loop that wrote its samples.
-    lat = sorted(Path(samples_dir).glob("*lateness*.txt")) if samples_dir else []
-    if lat:
+    if lateness:
         fig, ax = plt.subplots(figsize=(8, 4.5))
-        for f in lat:
-            us = [float(x) / 1e3 for x in f.read_text().split()]
-            if us:
-                ax.hist(us, bins=100, histtype="step", label=f"{f.stem} (n={len(us)})")
+        for name, ns in lateness.items():
+            ax.hist([x / 1e3 for x in ns], bins=100, histtype="step", label=f"{name} (n={len(ns)})")
         ax.set_yscale("log")
         ax.set_xlabel("release lateness (µs)")
         ax.set_ylabel("periods")
         ax.set_title("1 kHz periodic release lateness")
         ax.legend(fontsize=8)
-        fig.tight_layout()
-        fig.savefig(outdir / "lateness.png", dpi=110)
-        plt.close(fig)
-        made.append(("lateness.png", "Release lateness of the 1 kHz loops (log count)"))
+        save(fig, "lateness.png", "Release lateness of the 1 kHz loops (log count)")
 
     # Chimera rows against their peers, with the target where there is one.
     rr = [r for r in rows if r["ratio"] is not None]
@@ -323,10 +326,7 @@ def plots(rows, samples_dir, outdir, exps=None):
         ax.set_xlim(lo, max(2.0, max(r["ratio"] for r in rr) * 2))
         ax.set_xlabel("value / peer value (same run); black tick = target")
         ax.invert_yaxis()
-        fig.tight_layout()
-        fig.savefig(outdir / "ratios.png", dpi=110)
-        plt.close(fig)
-        made.append(("ratios.png", "Chimera rows over their peers (green: target met, red: missed)"))
+        save(fig, "ratios.png", "Chimera rows over their peers (green: target met, red: missed)")
 
     # Where the time goes: every peer on one log scale.
     pr = [r for r in rows if r["name"].startswith("peer_") and r["unit"] == "ns"
@@ -340,10 +340,7 @@ def plots(rows, samples_dir, outdir, exps=None):
         ax.set_xlabel("ns per operation (median)")
         ax.tick_params(axis="y", labelsize=7)
         ax.invert_yaxis()
-        fig.tight_layout()
-        fig.savefig(outdir / "peers.png", dpi=110)
-        plt.close(fig)
-        made.append(("peers.png", "The peers measured in this run"))
+        save(fig, "peers.png", "The peers measured in this run")
 
     exps = exps or {}
     m = exps.get("muf_overload")
@@ -362,11 +359,8 @@ def plots(rows, samples_dir, outdir, exps=None):
         axes[0].set_ylabel("jobs missing their deadline (%)")
         axes[1].legend()
         fig.suptitle("Transient overload: deadline misses per policy (virtual clock)")
-        fig.tight_layout()
-        fig.savefig(outdir / "muf_overload.png", dpi=110)
-        plt.close(fig)
-        made.append(("muf_overload.png", "MUF overload experiment: misses of critical and "
-                     "non-critical jobs under RM, EDF, MLF, MUF from 50 % to 150 % load"))
+        save(fig, "muf_overload.png", "MUF overload experiment: misses of critical and "
+                  "non-critical jobs under RM, EDF, MLF, MUF from 50 % to 150 % load")
     sc = exps.get("scaling_tasks")
     if sc:
         ns = sc["tasks"]
@@ -383,11 +377,8 @@ def plots(rows, samples_dir, outdir, exps=None):
         ax.set_title("Scheduler cost against the number of tasks")
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8)
-        fig.tight_layout()
-        fig.savefig(outdir / "scaling_tasks.png", dpi=110)
-        plt.close(fig)
-        made.append(("scaling_tasks.png", "Cost of scheduler operations, yield and spawn "
-                     "against the number of tasks (10 to 10,000)"))
+        save(fig, "scaling_tasks.png", "Cost of scheduler operations, yield and spawn "
+                  "against the number of tasks (10 to 10,000)")
     sr = exps.get("scaling_rtpus")
     if sr:
         ns = sr["rtpus"]
@@ -403,11 +394,8 @@ def plots(rows, samples_dir, outdir, exps=None):
         ax.set_title("Backplane cost against the number of RTPUs")
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8)
-        fig.tight_layout()
-        fig.savefig(outdir / "scaling_rtpus.png", dpi=110)
-        plt.close(fig)
-        made.append(("scaling_rtpus.png", "Remote semaphore hand-off between two RTPUs and one "
-                     "queue's fan-in against the number of RTPUs running (1 to 8)"))
+        save(fig, "scaling_rtpus.png", "Remote semaphore hand-off between two RTPUs and one "
+                  "queue's fan-in against the number of RTPUs running (1 to 8)")
     sm = exps.get("scaling_msg_size")
     if sm:
         xs = sm["bytes"]
@@ -428,11 +416,8 @@ def plots(rows, samples_dir, outdir, exps=None):
         ax.set_title("Message put+get with nobody waiting, against the size")
         ax.grid(alpha=0.3, which="both")
         ax.legend(fontsize=8)
-        fig.tight_layout()
-        fig.savefig(outdir / "scaling_msg_size.png", dpi=110)
-        plt.close(fig)
-        made.append(("scaling_msg_size.png", "Put+get with nobody waiting against the message "
-                     "size (24 B to 64 KiB), Chimera beside Boost message_queue and POSIX mq"))
+        save(fig, "scaling_msg_size.png", "Put+get with nobody waiting against the message "
+                  "size (24 B to 64 KiB), Chimera beside Boost message_queue and POSIX mq")
     return made
 
 
@@ -476,14 +461,15 @@ def main():
         if exps:
             exp_path = results.with_name("experiments.json")
             exp_path.write_text(json.dumps(exps, indent=1) + "\n")
-        made = plots(rows, samples, plot_dir, exps)
+        lateness = lateness_samples(samples)
+        made = plots(rows, lateness, plot_dir, exps)
         invoked = "/usr/bin/python3 bench/run.py " + " ".join(shlex.quote(a) for a in sys.argv[1:])
         if os.environ.get("MAKELEVEL"):  # started by the Makefile: say so first
             invoked = f"make bench{' QUICK=1' if args.quick else ''}`, i.e. `{invoked}"
         ran = " ".join(shlex.quote(c) for c in cmd).replace(tmp, "$TMP")
         md = markdown(rows, rest, machine(), (invoked, ran), args.quick, elapsed)
         md.extend(experiment_markdown(exps))
-        md.extend(lateness_markdown(samples))
+        md.extend(lateness_markdown(lateness))
         if made:
             md.extend(["## Plots", ""])
             rel = os.path.relpath(plot_dir, md_path.parent)
