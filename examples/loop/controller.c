@@ -43,23 +43,15 @@ static void on_shutdown(void *arg) {
 int main(int argc, char **argv) {
     (void)argc;
     (void)argv;
-    chm_msgq_attr_t qa;
-    chm_msgq_attr_init(&qa);
-    qa.max_msg = sizeof(loop_sample_t);
-    qa.max_count = 16;
-    int r = chm_msgq_create(LOOP_SENSE, &qa, chm_bp_self(), &g_sense);
-    if (r == -EEXIST) r = chm_msgq_open(LOOP_SENSE, &g_sense); /* this RTPU restarted */
-    if (r) {
-        printf("controller: cannot create %s: %s\n", LOOP_SENSE, chm_bp_last_error());
-        return 1;
-    }
+    if (loop_queue("controller", LOOP_SENSE, sizeof(loop_sample_t), 16, chm_bp_self(), &g_sense)) return 1;
     chm_task_attr_t a;
     chm_task_attr_init(&a);
     a.name = "controller";
     a.priority = 10;
     a.critical = 1;
     chm_tid_t tid;
-    if ((r = chm_task_spawn(&tid, controller, NULL, &a)) != 0) {
+    const int r = chm_task_spawn(&tid, controller, NULL, &a);
+    if (r) {
         printf("controller: cannot spawn: %s\n", strerror(-r));
         return 1;
     }

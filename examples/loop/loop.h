@@ -12,7 +12,12 @@
 #ifndef CHIMERA_EXAMPLE_LOOP_H
 #define CHIMERA_EXAMPLE_LOOP_H
 
+#include <errno.h>
 #include <stdint.h>
+#include <stdio.h>
+
+#include <chimera/bp.h>
+#include <chimera/msgq.h>
 
 #define LOOP_SENSE "loop.sense" /* sensor -> controller, RTPU 2's window */
 #define LOOP_REPLY "loop.reply" /* controller -> sensor, RTPU 1's window */
@@ -49,6 +54,21 @@ typedef struct loop_stat {
     uint32_t unsent;         /* samples the controller's queue refused */
     float position, setpoint;
 } loop_stat_t;
+
+/* Create the queue `name` (messages of `msg` bytes, `count` of them) in
+ * `where`, or open it when an earlier run of this RTPU (restarted after a
+ * crash) left it. `who` prefixes the line that says why it failed. */
+static inline int loop_queue(const char *who, const char *name, uint32_t msg, uint32_t count, int where,
+                             chm_msgq_t **out) {
+    chm_msgq_attr_t a;
+    chm_msgq_attr_init(&a);
+    a.max_msg = msg;
+    a.max_count = count;
+    int r = chm_msgq_create(name, &a, where, out);
+    if (r == -EEXIST) r = chm_msgq_open(name, out);
+    if (r) printf("%s: cannot create %s: %s\n", who, name, chm_bp_last_error());
+    return r;
+}
 
 /* The set point the controller steers to: a square wave, 2 s per level. */
 static inline float loop_setpoint(uint64_t seq) { return (seq / 2000) % 2 ? 0.5f : -0.5f; }

@@ -89,24 +89,11 @@ static void on_shutdown(void *arg) {
     chm_msgq_destroy(LOOP_STATS);
 }
 
-/* Create the queue `name`, or open it when an earlier run of this RTPU
- * (restarted after a crash) left it. */
-static int queue(const char *name, uint32_t msg, uint32_t count, int where, chm_msgq_t **out) {
-    chm_msgq_attr_t a;
-    chm_msgq_attr_init(&a);
-    a.max_msg = msg;
-    a.max_count = count;
-    int r = chm_msgq_create(name, &a, where, out);
-    if (r == -EEXIST) r = chm_msgq_open(name, out);
-    if (r) printf("sensor: cannot create %s: %s\n", name, chm_bp_last_error());
-    return r;
-}
-
 int main(int argc, char **argv) {
     (void)argc;
     (void)argv;
-    if (queue(LOOP_REPLY, sizeof(loop_reply_t), 16, chm_bp_self(), &g_reply) ||
-        queue(LOOP_STATS, sizeof(loop_stat_t), LOOP_STATS_CAPACITY, CHM_MSGQ_COMMON, &g_stats))
+    if (loop_queue("sensor", LOOP_REPLY, sizeof(loop_reply_t), 16, chm_bp_self(), &g_reply) ||
+        loop_queue("sensor", LOOP_STATS, sizeof(loop_stat_t), LOOP_STATS_CAPACITY, CHM_MSGQ_COMMON, &g_stats))
         return 1;
     chm_task_attr_t a;
     chm_task_attr_init(&a);

@@ -10,15 +10,18 @@ src=$1 build=$2
 dir=$(mktemp -d /dev/shm/chm-demo-XXXXXX) || exit 1
 bp=$dir/demo.bp
 out=$dir/out
+clean_up() {
+    pkill -9 -f "chimera-rtpu --backplane $bp" 2>/dev/null
+    rm -rf "$dir"
+}
 fail() {
     echo "demo_check: $*"
     cat "$out"
-    pkill -9 -f "chimera-rtpu --backplane $bp" 2>/dev/null
-    rm -rf "$dir"
+    clean_up
     exit 1
 }
 # Killed from outside (meson's timeout): the RTPUs and the files go too.
-trap 'pkill -9 -f "chimera-rtpu --backplane $bp" 2>/dev/null; rm -rf "$dir"; exit 1' INT TERM HUP
+trap 'clean_up; exit 1' INT TERM HUP
 CHIMERA_BACKPLANE=$bp DEMO_SECONDS=3 timeout -k 5 60 sh "$src/examples/loop/demo.sh" "$build" > "$out" 2>&1 ||
     fail "the demo exited with status $?"
 cat "$out"
