@@ -78,7 +78,7 @@ struct Tcb {
     bool interruptible = false;
     TimerNode tmr;  // wake-up (pause, timeout) or release of a periodic task
     struct IoWait* io = nullptr;  // the descriptors it waits on (io/fdwait.cpp)
-    const std::uint32_t* rword = nullptr;  // shared word it waits on (sync/remote_wait.cpp)
+    std::uint32_t* rword = nullptr;  // shared word it waits on (sync/remote_wait.cpp)
     TimerNode dl;   // deadline of the current cycle
 
     // Global error handling (err/): the task's handler set, allocated on

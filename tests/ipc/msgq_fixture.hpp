@@ -13,6 +13,7 @@
 #include "ipc/msgq/msgq.hpp"
 #include "ipc/wake/wake.hpp"
 #include "ipc_fixture.hpp"
+#include "rtpu_child.hpp"
 
 namespace chm::test {
 
@@ -60,18 +61,7 @@ protected:
     // real clock) bound to the backplane, let `setup` spawn tasks, run
     // until a task calls chm_kernel_stop(code); returns the code.
     static int run_rtpu(const std::string& path, int n, const std::function<void()>& setup) {
-        if (chm_bp_join(path.c_str(), n, nullptr)) return 101;
-        chm_kernel_config_t cfg;
-        chm_kernel_config_init(&cfg);
-        cfg.policy = CHM_SCHED_FIXED;
-        if (chm_kernel_init(&cfg)) return 102;
-        if (ipc::wake_bind_kernel()) return 103;
-        setup();
-        const int code = chm_kernel_run();
-        ipc::wake_unbind_kernel();
-        chm_kernel_fini();
-        chm_bp_leave();
-        return code;
+        return test::run_rtpu(path, n, [&] { return setup(), true; }, RtpuOptions{CHM_SCHED_FIXED, 0});
     }
     // A late cycle of a periodic task just continues (a loaded machine is
     // not what these tests are about).

@@ -10,6 +10,7 @@
 #include "port.hpp"
 #include "../kernel/gap_ticker.hpp"
 #include "ipc_fixture.hpp"
+#include "rtpu_child.hpp"
 
 namespace chm::test {
 namespace {
@@ -38,34 +39,6 @@ protected:
         return false;
     }
 };
-
-// ---- an RTPU in a child process: join, kernel, wake layer, tasks.
-template <class Spawn>
-int run_rtpu(const std::string& path, int slot, Spawn spawn_tasks, uint64_t idle_poll_ns = 0) {
-    if (chm_bp_join(path.c_str(), slot, "rtpu") != 0) return 90;
-    chm_kernel_config_t cfg;
-    chm_kernel_config_init(&cfg);
-    cfg.idle_poll_ns = idle_poll_ns;
-    if (chm_kernel_init(&cfg) != 0) return 91;
-    if (chm::ipc::wake_bind_kernel() != 0) return 92;
-    if (!spawn_tasks()) return 93;
-    const int r = chm_kernel_run();
-    chm::ipc::wake_unbind_kernel();
-    chm_kernel_fini();
-    chm_bp_leave();
-    return r;
-}
-
-chm_tid_t spawn_task(void (*fn)(void*), void* arg, const char* name, int prio, uint64_t period = 0) {
-    chm_task_attr_t a;
-    chm_task_attr_init(&a);
-    a.name = name;
-    a.priority = prio;
-    a.period_ns = period;
-    a.wcet_ns = period ? 50000 : 0;
-    chm_tid_t id = CHM_TID_NONE;
-    return chm_task_spawn(&id, fn, arg, &a) == 0 ? id : CHM_TID_NONE;
-}
 
 volatile int g_result = -1000;
 uint64_t g_waited = 0;
@@ -146,59 +119,6 @@ TEST_F(Rsem, ATaskOnOneRtpuWakesATaskOnAnother) {
     EXPECT_EQ(reap(giver), 0);
     EXPECT_EQ(reap(waiter), 0);
     EXPECT_EQ(chm_rsem_value(s), 0);
-}
-
-// A hand-off between two RTPUs that poll before sleeping stays in user
-// space: each ring finds the other RTPU choosing its next task or polling,
-// never running one, so it sends no signal. (Before the kernel published
-// "in the scheduler", most rings came while it re-armed its timer after
-// the task blocked: one signal per hand-off.)
-constexpr int kHandoffs = 2000;
-volatile int g_handoffs = 0;
-void ping_side(void*) {
-    chm_rsem_t *ping = nullptr, *pong = nullptr;
-    if (chm_rsem_open("ping", &ping) || chm_rsem_open("pong", &pong)) return;
-    for (int i = 0; i < kHandoffs; ++i) {
-        if (chm_rsem_v(ping) != 0 || chm_rsem_p_timed(pong, kWait) != 0) return;
-        g_handoffs = i + 1;
-    }
-}
-void pong_side(void*) {
-    chm_rsem_t *ping = nullptr, *pong = nullptr;
-    if (chm_rsem_open("ping", &ping) || chm_rsem_open("pong", &pong)) return;
-    for (int i = 0; i < kHandoffs; ++i) {
-        if (chm_rsem_p_timed(ping, kWait) != 0 || chm_rsem_v(pong) != 0) return;
-        g_handoffs = i + 1;
-    }
-}
-
-void idle_ticker(void*) {  // a periodic task: the RTPU's timer is armed
-    for (int i = 0; i < 100000 && g_handoffs < kHandoffs; ++i) chm_task_wait_period();
-}
-
-TEST_F(Rsem, HandOffsBetweenPollingRtpusSendNoSignals) {
-    attach_host();
-    make("ping");
-    make("pong");
-    const std::string path = path_;
-    auto side = [path](int slot, void (*fn)(void*)) {
-        const int r = run_rtpu(path, slot,
-                               [fn] {
-                                   return spawn_task(fn, nullptr, "side", 1) != CHM_TID_NONE &&
-                                          spawn_task(idle_ticker, nullptr, "ticker", 0, 5000000) != CHM_TID_NONE;
-                               },
-                               200000);  // poll 200 us before sleeping
-        const std::uint32_t signals = chm::port::doorbell_signals_sent();
-        std::fprintf(stderr, "RTPU %d: %d hand-offs, %llu signals sent to the other RTPU\n", slot, g_handoffs,
-                     (unsigned long long)signals);
-        if (r) return r;
-        if (g_handoffs != kHandoffs) return 50;
-        return signals < kHandoffs / 10 ? 0 : 51;
-    };
-    const pid_t a = spawn([&] { return side(1, ping_side); });
-    const pid_t b = spawn([&] { return side(2, pong_side); });
-    EXPECT_EQ(reap(a), 0);  // 51: a signal for most hand-offs
-    EXPECT_EQ(reap(b), 0);
 }
 
 // Two tasks of one RTPU wait; the less urgent one arrived first. Each V

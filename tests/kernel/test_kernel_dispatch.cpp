@@ -346,8 +346,8 @@ void ticker(void*) {
 void retry_maker(void*) {
     chm_task_pause_until(chm_time_now() + 2 * kMs);  // the ticker waits for its release
     port::irq_disable();
-    port::g_irq.pending = 1;        // a tick came while masked...
-    port::irq_restore_no_switch();  // ...and is re-delivered by a retry in 20 us
+    port::irq_mark_pending(port::kPendingTick);  // a tick came while masked...
+    port::irq_restore_no_switch();               // ...and is re-delivered by a retry in 20 us
     port::irq_disable();
     const uint64_t end = port::now_ns() + 300 * kUs;
     while (port::now_ns() < end) {  // the retry fires now, mask held

@@ -77,10 +77,16 @@ TEST_F(PortTimer, IdleSleepsUntilTheTimerWithTheMaskHeld) {
     EXPECT_GE(woke - start, 5000000u);
     // The tick was only recorded while masked; restoring takes it.
     static int hook_runs;
+    static std::uint32_t hook_why;
     hook_runs = 0;
-    chm::port::irq_set_pending_hook([] { ++hook_runs; });
+    hook_why = 0;
+    chm::port::irq_set_pending_hook([](std::uint32_t why) {
+        ++hook_runs;
+        hook_why |= why;
+    });
     chm::port::irq_restore();
     EXPECT_EQ(hook_runs, 1);
+    EXPECT_EQ(hook_why, chm::port::kPendingTick);
     EXPECT_FALSE(chm::port::g_irq.pending);
     chm::port::irq_set_pending_hook(nullptr);
 }

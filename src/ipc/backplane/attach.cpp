@@ -82,6 +82,7 @@ void fill_slot(RtpuEntry* e, SlotKind kind, const char* name) {
     e->pending.store(0, R);
     e->idle.store(0, R);
     e->urgency.store(0, R);
+    e->running.store(0, R);
     e->poll_ns.store(0, R);
     e->recoverer_pid.store(0, R);
     e->heartbeat_ms.store(mono_ms(), R);

@@ -31,7 +31,7 @@ static_assert(sizeof(A32) == 4);
 
 inline constexpr std::uint32_t kMagic = 0x43484D42;         // "CHMB"
 inline constexpr std::uint32_t kMagicSwapped = 0x424D4843;  // other byte order
-inline constexpr std::uint32_t kLayoutVersion = 1;
+inline constexpr std::uint32_t kLayoutVersion = 2;
 inline constexpr std::uint32_t kPage = 4096;
 inline constexpr std::uint32_t kMaxSlots = 32;   // attach masks are uint32_t
 inline constexpr std::uint32_t kMinSlots = 2;
@@ -128,12 +128,12 @@ struct RtpuEntry {
     A32 mailbox;             // futex word of the RTPU's mailbox interrupt (kernel issue)
     A32 pending;             // pending mailbox events, one bit per source (kernel issue)
     A32 idle;                // 1 while the RTPU sleeps on its mailbox futex
-    A32 urgency;             // urgency of the task it runs now (remote wake decisions)
+    A32 urgency;             // urgency of the task it runs now (port::RingFor), 0: lowest
     A32 poll_ns;             // poll this long before sleeping on the mailbox (0: never)
     A32 recoverer_pid;       // while RECOVERING: the process doing it
     std::uint32_t recoverer_start_lo;  // its start time, low 32 bits
     A32 joined_ms;           // monotonic ms of the join
-    std::uint32_t pad0;
+    A32 running;             // id of the task it runs now (port::RingFor), 0: none
     char name[kNameMax + 1];
     std::uint32_t reserved[8];
 };

@@ -103,6 +103,7 @@ void do_recover(const View& v, std::uint32_t slot, std::uint32_t gen) {
     e->pending.store(0, R);
     e->idle.store(0, R);
     e->urgency.store(0, R);
+    e->running.store(0, R);
     e->poll_ns.store(0, R);
     e->mailbox.fetch_add(1, R);
     h->recoveries.fetch_add(1, R);

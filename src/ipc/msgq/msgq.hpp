@@ -30,10 +30,12 @@
 
 #include "chimera/msgq.h"
 #include "ipc/backplane/backplane.hpp"
+#include "ipc/wake/wake.hpp"
 
 namespace chm::ipc::msgq {
 
 using bp::A32;
+using ipc::WaiterId;
 
 inline constexpr std::uint32_t kMagic = 0x4D534751;  // "MSGQ"
 inline constexpr std::uint32_t kLevels = 32;         // priorities 0..31
@@ -92,9 +94,10 @@ struct Waiter {
     A32 state;   // WaiterState
     A32 ticket;  // this registration's number (never 0)
     A32 token;   // the waiter's owner token (slot and generation)
-    A32 task;    // 1: a parked task (doorbell), 0: a futex waiter
-    A32 prio;    // the waiter's priority (int32 stored as uint32)
-    std::uint32_t pad[2];
+    A32 task;     // the parked task's id (ipc::WaiterId), 0: a futex waiter
+    A32 prio;     // the waiter's priority (int32 stored as uint32)
+    A32 urgency;  // ipc::WaiterId::urgency
+    std::uint32_t pad;
 };
 
 static_assert(bp::kShared<QueueHeader> && sizeof(QueueHeader) == 384);
@@ -140,7 +143,7 @@ bool geometry_ok(const QueueHeader* q, std::uint32_t payload_size);
 struct Wake {
     std::uint32_t* word;
     std::uint32_t ticket, slot;
-    bool task;
+    WaiterId who;
 };
 // Wake-ups collected under the lock, delivered after it is released (a
 // wake is a system call or a doorbell; the lock should not wait for it).

@@ -123,19 +123,22 @@ std::uint64_t now_ns(bool task) {
 
 std::int32_t my_priority(bool task) { return task ? kernel::remote_waiter_priority() : 0; }
 
+WaiterId recorded(const Waiter* w) { return WaiterId{w->task.load(R), w->urgency.load(R)}; }
+
 // A free record for the caller, or nullptr (all taken: the caller polls).
-Waiter* register_locked(QueueHeader* q, std::uint32_t state, std::uint32_t me, bool task,
+Waiter* register_locked(QueueHeader* q, std::uint32_t state, std::uint32_t me, WaiterId who,
                         std::int32_t prio) {
     for (std::uint32_t i = 0; i < q->max_waiters; ++i) {
         Waiter* w = waiter_at(q, i);
         if (w->state.load(R) != kWaiterFree) continue;
         std::uint32_t t = bump(q->next_ticket, 1);
-        if (t == 0) t = bump(q->next_ticket, 1);
+        while (!kernel::word_granted(t)) t = bump(q->next_ticket, 1);  // a grant value
         w->word.store(0, R);
         w->ticket.store(t, R);
         w->token.store(me, R);
-        w->task.store(task ? 1 : 0, R);
+        w->task.store(who.task, R);
         w->prio.store(std::uint32_t(prio), R);
+        w->urgency.store(who.urgency, R);
         w->state.store(state, std::memory_order_release);
         bump(waiting_of(q, state), 1);
         return w;
@@ -196,7 +199,8 @@ int run(const bp::Attachment* a, QueueHeader* q, const Op& op, std::int64_t time
         return r;
     }
     // Waiting.
-    const bool task = waits_as_task();
+    const WaiterId who = waiter_self();
+    const bool task = who.as_task();
     const std::int32_t prio = my_priority(task);
     const std::uint64_t start = timeout_ns > 0 ? now_ns(task) : 0;
     bool timed_out = false;
@@ -226,7 +230,7 @@ int run(const bp::Attachment* a, QueueHeader* q, const Op& op, std::int64_t time
             left = timeout_ns - std::int64_t(spent);
         }
         bp::lock_mark_dirty(&q->lock);
-        Waiter* w = register_locked(q, Op::kMine, a->token, task, prio);
+        Waiter* w = register_locked(q, Op::kMine, a->token, who, prio);
         const std::uint32_t ticket = w ? w->ticket.load(R) : 0;
         bp::lock_clear_dirty(&q->lock);
         unlock_queue(q);
@@ -297,11 +301,11 @@ void Wakes::add(const Wake& x) {
         w[n++] = x;
         return;
     }
-    wake_granted(x.word, x.slot, x.task);  // no room to defer: wake now
+    wake_granted(x.word, x.slot, x.who);  // no room to defer: wake now
 }
 
 void Wakes::deliver() {
-    for (std::uint32_t i = 0; i < n; ++i) wake_granted(w[i].word, w[i].slot, w[i].task);
+    for (std::uint32_t i = 0; i < n; ++i) wake_granted(w[i].word, w[i].slot, w[i].who);
     n = 0;
 }
 
@@ -340,8 +344,8 @@ bool grant_one_locked(const bp::View& v, QueueHeader* q, std::uint32_t state, Wa
     }
     if (!best) return false;
     const std::uint32_t t = best->ticket.load(R);
-    best->word.store(t, std::memory_order_release);
-    out->add(Wake{word_of(best->word), t, bp::token_slot(best->token.load(R)), best->task.load(R) != 0});
+    if (!store_grant(word_of(best->word), t))
+        out->add(Wake{word_of(best->word), t, bp::token_slot(best->token.load(R)), recorded(best)});
     return true;
 }
 
@@ -350,8 +354,8 @@ void grant_all_locked(QueueHeader* q, Wakes* out) {
         Waiter* w = waiter_at(q, i);
         if (w->state.load(R) == kWaiterFree) continue;
         const std::uint32_t t = w->ticket.load(R);
-        w->word.store(t, std::memory_order_release);
-        out->add(Wake{word_of(w->word), t, bp::token_slot(w->token.load(R)), w->task.load(R) != 0});
+        if (!store_grant(word_of(w->word), t))
+            out->add(Wake{word_of(w->word), t, bp::token_slot(w->token.load(R)), recorded(w)});
     }
 }
 

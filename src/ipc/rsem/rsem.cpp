@@ -31,8 +31,8 @@ struct Waiter {
     A32 slot, gen;
     A32 prio;     // task priority (higher first); host threads 0
     A32 seq;      // arrival, FIFO among equals
-    A32 as_task;  // 1: a parked task (doorbell); 0: the futex
-    A32 pad;
+    A32 task;     // the parked task's id (WaiterId); 0: the futex
+    A32 urgency;  // WaiterId::urgency
 };
 
 struct Rsem {
@@ -88,11 +88,17 @@ int lock(Rsem* s) {
 
 void unlock(Rsem* s) { lock_release(&s->lock); }
 
+WaiterId recorded(const Waiter* w) { return WaiterId{w->task.load(), w->urgency.load()}; }
+
 // The most urgent waiting record, or nullptr. Lock held.
 Waiter* most_urgent_locked(Rsem* s) {
     Waiter* best = nullptr;
-    for (Waiter& w : s->w) {
+    std::uint32_t left = s->nwaiting.load();  // stop after the last waiting record
+    for (int i = CHM_RSEM_WAITERS - 1; i >= 0; --i) {
+        Waiter& w = s->w[i];
+        if (!left) break;
         if (w.state.load() != kWaiting) continue;
+        --left;
         if (!best || w.prio.load() > best->prio.load() ||
             (w.prio.load() == best->prio.load() && int32_t(w.seq.load() - best->seq.load()) < 0))
             best = &w;
@@ -100,17 +106,18 @@ Waiter* most_urgent_locked(Rsem* s) {
     return best;
 }
 
-// Give one unit: to the most urgent waiter (returned, to be woken after
-// the unlock) or to the count. Lock held.
+// Give one unit: to the most urgent waiter (returned when it must be woken
+// after the unlock: not when its RTPU polls its word) or to the count.
+// Lock held.
 int give_locked(Rsem* s, Waiter** woken) {
     *woken = nullptr;
     if (Waiter* w = most_urgent_locked(s)) {
         lock_mark_dirty(&s->lock);
         w->state.store(kGranted);
-        w->grant.store(1, std::memory_order_release);
+        const bool watched = store_grant(reinterpret_cast<std::uint32_t*>(&w->grant), 1);
         s->nwaiting.fetch_sub(1);
         lock_clear_dirty(&s->lock);
-        *woken = w;
+        if (!watched) *woken = w;
         return 0;
     }
     if (s->kind.load() == CHM_SEM_BINARY) {
@@ -153,7 +160,7 @@ void rsem_recover(const View& v, std::uint32_t index, std::uint32_t dead_slot, s
     lock_release(&s->lock);
     for (std::uint32_t i = 0; i < n; ++i)
         wake_granted(reinterpret_cast<std::uint32_t*>(&to_wake[i]->grant), to_wake[i]->slot.load(),
-                     to_wake[i]->as_task.load() != 0);
+                     recorded(to_wake[i]));
 }
 
 void rsem_check(const View& v, std::uint32_t off, std::uint32_t size, const char* name, Report& r) {
@@ -272,7 +279,8 @@ int chm_rsem_p_timed(chm_rsem_t* h, int64_t timeout_ns) {
         return -EAGAIN;
     }
     Waiter* me = nullptr;
-    for (Waiter& w : s->w) {
+    for (int i = CHM_RSEM_WAITERS - 1; i >= 0; --i) {
+        Waiter& w = s->w[i];
         if (w.state.load() == kFree) {
             me = &w;
             break;
@@ -289,7 +297,9 @@ int chm_rsem_p_timed(chm_rsem_t* h, int64_t timeout_ns) {
     me->gen.store(a->gen & 0xFFFFFF);
     me->prio.store(std::uint32_t(chm::kernel::remote_waiter_priority()));
     me->seq.store(s->seq.fetch_add(1) + 1);
-    me->as_task.store(waits_as_task() ? 1 : 0);
+    const WaiterId who = waiter_self();
+    me->task.store(who.task);
+    me->urgency.store(who.urgency);
     me->state.store(kWaiting);
     s->nwaiting.fetch_add(1);
     lock_clear_dirty(&s->lock);
@@ -300,12 +310,12 @@ int chm_rsem_p_timed(chm_rsem_t* h, int64_t timeout_ns) {
     // Granted: the granter already took the record off the waiting list
     // (kGranted, nwaiting), so giving it back needs no lock: a hand-off
     // costs one lock round trip per side instead of two.
-    if (me->grant.load(std::memory_order_acquire) != 0) {
+    if (chm::kernel::word_granted(me->grant.load(std::memory_order_acquire))) {
         me->state.store(kFree, std::memory_order_release);
         return 0;
     }
     if (int e = lock(s)) return e;
-    if (me->grant.load() != 0) {
+    if (chm::kernel::word_granted(me->grant.load())) {
         r = 0;  // granted, perhaps just as the wait timed out
     } else if (me->state.load() == kWaiting) {
         s->nwaiting.fetch_sub(1);
@@ -325,13 +335,13 @@ int chm_rsem_v(chm_rsem_t* h) {
     Waiter* w = nullptr;
     const int r = give_locked(s, &w);
     std::uint32_t slot = 0;
-    bool as_task = false;
+    WaiterId who;
     if (w) {
         slot = w->slot.load();
-        as_task = w->as_task.load() != 0;
+        who = recorded(w);
     }
     unlock(s);
-    if (w) wake_granted(reinterpret_cast<std::uint32_t*>(&w->grant), slot, as_task);
+    if (w) wake_granted(reinterpret_cast<std::uint32_t*>(&w->grant), slot, who);
     if (r) set_error("chm_rsem_v: the count would overflow");
     return r;
 }

@@ -19,7 +19,8 @@ namespace {
 std::uint32_t* word_of(bp::A32& a) { return reinterpret_cast<std::uint32_t*>(&a); }
 
 port::Doorbell doorbell_of(bp::RtpuEntry* e) {
-    return port::Doorbell{word_of(e->pending), word_of(e->mailbox), word_of(e->idle), true};
+    return port::Doorbell{word_of(e->pending), word_of(e->mailbox), word_of(e->idle),
+                          word_of(e->running),  word_of(e->urgency), true};
 }
 
 bool g_bound = false;
@@ -37,6 +38,7 @@ int wake_bind_kernel() {
     const port::Doorbell db = doorbell_of(e);
     port::irq_disable();
     port::doorbell_use(&db);
+    kernel::publish_running_locked();
     port::irq_restore();
     e->tid.store(std::uint32_t(port::kernel_tid()));
     if (int r = chm_irq_install(kernel::kGrantVector, grant_vector, nullptr); r != 0 && r != -EBUSY)
@@ -76,7 +78,7 @@ int wait_word(std::uint32_t* word, std::int64_t timeout_ns) {
         deadline.tv_sec += time_t(timeout_ns / 1000000000 + ns / 1000000000);
         deadline.tv_nsec = long(ns % 1000000000);
     }
-    while (__atomic_load_n(word, __ATOMIC_ACQUIRE) == 0) {
+    while (!kernel::word_granted(__atomic_load_n(word, __ATOMIC_ACQUIRE))) {
         timespec left{};
         timespec* limit = nullptr;
         if (timeout_ns >= 0) {
@@ -97,20 +99,28 @@ int wait_word(std::uint32_t* word, std::int64_t timeout_ns) {
 
 bool waits_as_task() { return kernel::remote_wait_possible(); }
 
-void grant_word(std::uint32_t* word, std::uint32_t value, std::uint32_t slot, bool task_waiter) {
-    __atomic_store_n(word, value, __ATOMIC_RELEASE);
-    wake_granted(word, slot, task_waiter);
+WaiterId waiter_self() {
+    const std::uint32_t task = kernel::remote_waiter_id();
+    return WaiterId{task, task ? kernel::remote_waiter_urgency() : UINT32_MAX};
 }
 
-void wake_granted(std::uint32_t* word, std::uint32_t slot, bool task_waiter) {
+bool store_grant(std::uint32_t* word, std::uint32_t value) {
+    return __atomic_exchange_n(word, value, __ATOMIC_ACQ_REL) == kernel::kWordWatched;
+}
+
+void grant_word(std::uint32_t* word, std::uint32_t value, std::uint32_t slot, WaiterId who) {
+    if (!store_grant(word, value)) wake_granted(word, slot, who);
+}
+
+void wake_granted(std::uint32_t* word, std::uint32_t slot, WaiterId who) {
     bp::Attachment* a = bp::current();
     bp::RtpuEntry* e = a && slot < a->slots() ? a->rtpu(slot) : nullptr;
-    if (task_waiter && e && e->tid.load() != 0) {
+    if (who.as_task() && e && e->tid.load() != 0) {
         if (slot == a->slot && port::on_kernel_thread()) {
             kernel::remote_scan();  // our own RTPU, from one of its tasks
         } else {
             port::doorbell_ring(doorbell_of(e), 1u << kernel::kGrantVector, int(e->pid.load()),
-                                int(e->tid.load()));
+                                int(e->tid.load()), port::RingFor{who.urgency, who.task});
         }
         return;
     }

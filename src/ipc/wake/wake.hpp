@@ -32,16 +32,36 @@ int wake_ring(std::uint32_t slot, int vector);
 // Returns 0, -ETIMEDOUT or -EINTR.
 int wait_word(std::uint32_t* word, std::int64_t timeout_ns);
 
-// How the caller of wait_word will wait: parked as a task (woken through
-// its RTPU's doorbell) or on the word's futex (any other thread). A waiter
-// records this beside its word so the granter knows how to wake it.
+// Who waits on a word, as the granter needs it; a waiter records this
+// beside its word (two words in backplane memory).
+struct WaiterId {
+    // The parked task's id as its RTPU publishes it (kernel::
+    // remote_waiter_id); 0: a thread waiting on the word's futex.
+    std::uint32_t task = 0;
+    // Its urgency on its RTPU's scale (kernel::remote_waiter_urgency): a
+    // grant to a task that does not outrank the running one, or to the
+    // running task itself, raises the vector without a directed signal.
+    std::uint32_t urgency = UINT32_MAX;
+    bool as_task() const { return task != 0; }
+};
+
+// The caller's WaiterId: how wait_word will wait (parked as a task, or on
+// the futex) and the rest of what a granter needs.
+WaiterId waiter_self();
+// Only how: true when wait_word parks the caller as a task.
 bool waits_as_task();
 
-// Store `value` (non-zero) into *word and wake its waiter in `slot`: a task
-// through the slot's doorbell (grant vector), anyone else by the futex.
-void grant_word(std::uint32_t* word, std::uint32_t value, std::uint32_t slot, bool task_waiter);
+// Store the grant `value` into *word (non-zero, not kernel::kWordWatched).
+// True when the waiter's RTPU was polling that word in its idle loop: it
+// sees the grant there, and no wake-up is needed.
+bool store_grant(std::uint32_t* word, std::uint32_t value);
+// Store `value` and wake its waiter `who` in `slot` unless it watches the
+// word: a task through the slot's doorbell (grant vector), anyone else by
+// the futex.
+void grant_word(std::uint32_t* word, std::uint32_t value, std::uint32_t slot, WaiterId who);
 // Only the wake-up half: for a granter that stored the word under its own
-// lock (so a waiter timing out at that moment sees the grant).
-void wake_granted(std::uint32_t* word, std::uint32_t slot, bool task_waiter);
+// lock (so a waiter timing out at that moment sees the grant) and found it
+// not watched.
+void wake_granted(std::uint32_t* word, std::uint32_t slot, WaiterId who);
 
 }  // namespace chm::ipc

@@ -187,7 +187,9 @@ int call(int rtpu, Kind kind, const void* req, std::uint32_t len, void* reply, s
     r->status = 0;
     r->len = len;
     r->server = 0;
-    r->waiter_task.store(ipc::waits_as_task() ? 1 : 0, R);
+    const ipc::WaiterId who = ipc::waiter_self();
+    r->waiter_task.store(who.task, R);
+    r->waiter_urgency.store(who.urgency, R);
     r->reply.store(0, R);
     if (len) std::memcpy(payload_of(r), req, len);
     std::uint32_t expect = make_state(seq, kWriting);

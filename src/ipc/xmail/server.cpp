@@ -215,7 +215,7 @@ void serve(Record* r, std::uint32_t seq) {
     }
     const std::uint32_t owner = r->owner.load(R);
     ipc::grant_word(reinterpret_cast<std::uint32_t*>(&r->reply), 1, bp::token_slot(owner),
-                    r->waiter_task.load(R) != 0);
+                    ipc::WaiterId{r->waiter_task.load(R), r->waiter_urgency.load(R)});
 }
 
 // Serve every posted record, oldest first; free what dead senders left.

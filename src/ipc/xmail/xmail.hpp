@@ -43,12 +43,13 @@ struct Record {
     bp::A32 owner;        // sender's token (layout.hpp), written before the claim
     bp::A32 stamp_ms;     // monotonic ms of the claim
     bp::A32 reply;        // futex word: 0 until the reply is in
-    bp::A32 waiter_task;  // 1: the sender waits as a task (woken through its doorbell)
+    bp::A32 waiter_task;  // the sender's task id (ipc::WaiterId): it waits as a task; 0: the futex
     std::uint32_t kind;   // Kind
     std::int32_t status;  // the server's result: >= 0 or -errno
     std::uint32_t len;    // request bytes, then reply bytes
     std::uint32_t server; // token of the server that took it
-    std::uint32_t reserved[7];
+    bp::A32 waiter_urgency;  // ipc::WaiterId::urgency
+    std::uint32_t reserved[6];
 };
 static_assert(bp::kShared<Record> && sizeof(Record) == 64);
 inline constexpr std::uint32_t kRecordMin = 128;   // CHM_RTPU_RECORD_MIN

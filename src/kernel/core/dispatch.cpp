@@ -6,6 +6,7 @@
 
 #include "err/err_internal.hpp"
 #include "kernel.hpp"
+#include "sync/remote_wait.hpp"
 
 namespace chm::kernel {
 
@@ -77,6 +78,7 @@ __attribute__((noinline)) void switch_to_locked(Tcb* next, std::uint64_t now) {
     int* err = g_k.errno_loc;  // errno without a TLS lookup per switch
     if (prev) prev->saved_errno = *err;
     g_k.current = next;
+    if (port::g_db_publishes) publish_running_locked();
     if (g_k.cfg.cpu_accounting) g_k.switched_in_at = now;
     g_k.quantum_due = 0;
     if (next && g_k.cfg.quantum_ns) arm_quantum_if_shared_locked(next, now);
@@ -123,6 +125,8 @@ inline std::uint64_t schedule_now_locked() {
 }
 
 void schedule_locked() {
+    // A priority changed without a switch (set, lent, handler) is published too.
+    if (port::g_db_publishes) publish_running_locked();
     const std::uint64_t now = schedule_now_locked();
     Tcb* cur = g_k.current;
     const bool cur_runs = cur && cur->state == TaskState::Running;
@@ -296,15 +300,21 @@ void preempted_from_trampoline() {
     port::irq_restore();
 }
 
-// A tick that landed while the mask was held; runs with the mask held.
-void pending_tick() {
+// A tick, or doorbell vectors left behind a switch, that arrived while the
+// mask was held; runs with the mask held.
+void pending_tick(std::uint32_t why) {
     const std::uint64_t now = now_locked();
-    // It may be the port's own retry (a deferred preemption) that fired,
-    // not what the kernel armed: forget a one-shot (re-armed below).
-    timer_fired_locked(now);
+    if (why & port::kPendingTick) {
+        // It may be the port's own retry (a deferred preemption) that
+        // fired, not what the kernel armed: forget a one-shot (re-armed
+        // below).
+        timer_fired_locked(now);
+    }
     irq_dispatch_locked();
-    timers_run_locked(now);
-    timer_program_locked(now);
+    if (why & port::kPendingTick) {
+        timers_run_locked(now);
+        timer_program_locked(now);
+    }
     if (g_k.current && must_switch_locked(now)) {
         reschedule_locked();
     }

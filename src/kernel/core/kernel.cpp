@@ -7,6 +7,7 @@
 #include "err/err_internal.hpp"
 #include "kernel.hpp"
 #include "kernel/mem/heap.hpp"
+#include "sync/remote_wait.hpp"
 
 namespace chm::kernel {
 
@@ -59,9 +60,15 @@ int idle_loop_locked() {
             continue;
         }
         timer_program_locked(now);
-        port::idle_wait_locked(g_k.cfg.idle_poll_ns);
-        if (port::g_irq.pending) {
-            port::g_irq.pending = 0;
+        if (g_k.cfg.idle_poll_ns && remote_waiting_locked()) {
+            // The poll watches the parked tasks' words: a grant needs no ring.
+            port::idle_wait_locked(g_k.cfg.idle_poll_ns, &kRemoteWatch);
+            remote_scan_locked();
+        } else {
+            port::idle_wait_locked(g_k.cfg.idle_poll_ns);
+        }
+        // A ring marked pending is dispatched at the top of the loop.
+        if (port::irq_take_pending_bits() & port::kPendingTick) {
             const std::uint64_t t = now_locked();
             timer_fired_locked(t);
             timers_run_locked(t);

@@ -113,8 +113,7 @@ void io_idle_wait_locked() {
         timer_program_locked(now_locked());
     }
     if (port::idle_wait_fds_locked(g_polled, n, 0) > 0) scatter_locked();
-    if (port::g_irq.pending && !g_k.cfg.virtual_clock) {
-        port::g_irq.pending = 0;
+    if (!g_k.cfg.virtual_clock && (port::irq_take_pending_bits() & port::kPendingTick)) {
         g_k.armed_at = 0;
         const std::uint64_t t = now_locked();
         timers_run_locked(t);

@@ -123,13 +123,21 @@ std::uint64_t now_ns();
 // it when the count returns to zero. Task or kernel context.
 struct IrqState {
     volatile std::uint32_t nest;     // > 0: interrupts masked
-    volatile std::uint32_t pending;  // a tick arrived while masked
+    volatile std::uint32_t pending;  // what arrived while masked: kPending* bits
 };
 extern IrqState g_irq;
+inline constexpr std::uint32_t kPendingTick = 1;  // the timer signal
+inline constexpr std::uint32_t kPendingRing = 2;  // doorbell vectors to dispatch
+// Record `bits` as pending (mask held). Atomic against the timer handler,
+// which may set its own bit in between on the same thread.
+inline void irq_mark_pending(std::uint32_t bits) { __atomic_fetch_or(&g_irq.pending, bits, __ATOMIC_RELAXED); }
+// Take (and clear) what is pending.
+inline std::uint32_t irq_take_pending_bits() { return __atomic_exchange_n(&g_irq.pending, 0, __ATOMIC_RELAXED); }
 
-// Called by irq_restore() (with the mask held once more) when a tick arrived
-// while masked. Installed by the kernel with irq_set_pending_hook().
-using PendingHook = void (*)();
+// Called by irq_restore() (with the mask held once more) when something
+// arrived while masked, with the kPending* bits that did. Installed by the
+// kernel with irq_set_pending_hook().
+using PendingHook = void (*)(std::uint32_t why);
 void irq_set_pending_hook(PendingHook hook);
 void irq_take_pending();  // slow path of irq_restore; out of line
 
@@ -279,8 +287,29 @@ struct Doorbell {
     std::uint32_t* pending = nullptr;  // raised mailbox vectors, one bit each
     std::uint32_t* seq = nullptr;      // futex word, bumped by every ring and tick
     std::uint32_t* state = nullptr;    // DoorbellState
+    // Published at every switch when present (a backplane doorbell): the
+    // running task's id (0: none) and urgency (0: lowest), so a ring that
+    // would not preempt it need not interrupt it (RingFor). Running 0: the
+// kernel is between tasks (idle loop), where it looks at `pending` before
+// it runs a task or sleeps.
+    std::uint32_t* running = nullptr;  // kRunningUnknown until the kernel publishes
+    std::uint32_t* urgency = nullptr;
     bool shared = false;               // a futex shared between processes
 };
+
+inline constexpr std::uint32_t kRunningUnknown = UINT32_MAX;
+
+// What a ring is for, to decide whether a running RTPU must be interrupted:
+// a ring for the task it runs now (that task looks at its word before it
+// parks), or of urgency no higher than the running task's, sets the vector
+// without a signal; the RTPU takes it at its next switch or tick. The
+// default is an interrupt: vectors with handlers, and any doorbell that
+// publishes nothing.
+struct RingFor {
+    std::uint32_t urgency = UINT32_MAX;
+    std::uint32_t task = 0;  // the task the ring wakes (0: none in particular)
+};
+inline constexpr RingFor kRingInterrupt{};
 
 // Make `db` this RTPU's doorbell (nullptr: back to the private default).
 // Bits already pending in the old one move over. Kernel thread, mask held.
@@ -293,9 +322,19 @@ std::uint32_t doorbell_take();
 // process `pid`, and wake it as its state requires (futex wake, directed
 // timer signal, or nothing while it polls). Any thread or process; async-
 // signal-safe.
-void doorbell_ring(const Doorbell& db, std::uint32_t bits, int pid, int tid);
-// How many directed signals this process's rings have sent (statistics).
+void doorbell_ring(const Doorbell& db, std::uint32_t bits, int pid, int tid, RingFor why = kRingInterrupt);
+// Publish what this RTPU runs now (the kernel's switch, mask held): a no-op
+// unless the doorbell has running/urgency words. When the published state
+// may let a skipped ring matter (another task, or a lower urgency), the
+// doorbell's pending vectors are looked at after the store, and kPendingRing
+// marks them for the next irq_restore: no ring is left behind a switch.
+void doorbell_publish_locked(std::uint32_t running, std::uint32_t urgency);
+inline bool g_db_publishes = false;  // the doorbell in use has those words
+// How many rings carrying vectors this process made, and how many of them
+// sent a directed signal (statistics).
+std::uint32_t doorbell_rings_sent();
 std::uint32_t doorbell_signals_sent();
+
 
 // ------------------------------------------------------------------ idle
 
@@ -304,7 +343,15 @@ std::uint32_t doorbell_signals_sent();
 // kernel's idle loop with the mask held and nothing ready; returns with the
 // mask held. A ring or tick that happens between the caller's check and the
 // sleep is not lost.
-void idle_wait_locked(std::uint64_t poll_ns = 0);
+// `watch`, when given, is what else the poll looks at (the kernel's parked
+// tasks' words): begin() before the poll and end() after it (before any
+// sleep), each true when something woke; woken() in the poll loop.
+struct IdleWatch {
+    bool (*begin)();
+    bool (*woken)();
+    bool (*end)();
+};
+void idle_wait_locked(std::uint64_t poll_ns = 0, const IdleWatch* watch = nullptr);
 
 // idle_wait_locked() that also returns when one of `fds` is ready (their
 // revents are filled in) or at `until_ns` (monotonic; 0 = no limit).

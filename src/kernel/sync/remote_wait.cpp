@@ -23,14 +23,83 @@ int remote_waiter_priority() {
     return cur ? cur->s.priority : 0;
 }
 
+namespace {
+
+std::uint32_t task_id(const Tcb* t) { return std::uint32_t(tid_of(t)) + 1; }
+
+// Priorities in an unsigned order. 0 stays free for "the lowest" (what
+// the deadline policies publish) and UINT32_MAX for "interrupt whatever
+// runs" (their waiters, and vectors with handlers).
+std::uint32_t fixed_urgency(int priority) {
+    const std::uint32_t u = std::uint32_t(priority) ^ 0x80000000u;
+    return u == 0 ? 1 : u == UINT32_MAX ? UINT32_MAX - 1 : u;
+}
+
+bool priority_is_the_order() { return g_k.builtin && g_k.policy == CHM_SCHED_FIXED; }
+
+}  // namespace
+
+std::uint32_t remote_waiter_id() { return remote_wait_possible() ? task_id(g_k.current) : 0; }
+
+std::uint32_t remote_waiter_urgency() {
+    if (!priority_is_the_order()) return UINT32_MAX;
+    const Tcb* cur = port::on_kernel_thread() ? g_k.current : nullptr;
+    return cur ? fixed_urgency(cur->s.priority) : UINT32_MAX;
+}
+
+void publish_running_locked() {
+    const Tcb* t = g_k.current;
+    if (!t) return port::doorbell_publish_locked(0, 0);
+    port::doorbell_publish_locked(task_id(t), priority_is_the_order() ? fixed_urgency(t->s.priority) : 0);
+}
+
 void remote_scan_locked() {
     Tcb* t = g_remote.head;
     while (t) {
         Tcb* next = t->wnext;
-        if (__atomic_load_n(t->rword, __ATOMIC_ACQUIRE) != 0) wake_locked(t, 0);
+        if (word_granted(__atomic_load_n(t->rword, __ATOMIC_ACQUIRE))) wake_locked(t, 0);
         t = next;
     }
 }
+
+bool remote_waiting_locked() { return g_remote.head != nullptr; }
+
+namespace {
+
+// Mark every parked task's word watched (0 -> kWordWatched); true when one
+// is granted already. Granters exchange the word, so each either finds the
+// mark (and leaves the wake-up to this poll) or comes after end() and rings.
+bool watch_begin() {
+    bool granted = false;
+    for (const Tcb* t = g_remote.head; t; t = t->wnext) {
+        std::uint32_t expect = 0;
+        if (!__atomic_compare_exchange_n(t->rword, &expect, kWordWatched, false, __ATOMIC_ACQ_REL,
+                                         __ATOMIC_ACQUIRE))
+            granted |= word_granted(expect);
+    }
+    return granted;
+}
+
+bool watch_woken() {
+    for (const Tcb* t = g_remote.head; t; t = t->wnext)
+        if (word_granted(__atomic_load_n(t->rword, __ATOMIC_ACQUIRE))) return true;
+    return false;
+}
+
+// Unmark (kWordWatched -> 0); true when one was granted meanwhile.
+bool watch_end() {
+    bool granted = false;
+    for (const Tcb* t = g_remote.head; t; t = t->wnext) {
+        std::uint32_t expect = kWordWatched;
+        if (!__atomic_compare_exchange_n(t->rword, &expect, 0, false, __ATOMIC_ACQ_REL, __ATOMIC_ACQUIRE))
+            granted |= word_granted(expect);
+    }
+    return granted;
+}
+
+}  // namespace
+
+const port::IdleWatch kRemoteWatch{watch_begin, watch_woken, watch_end};
 
 void remote_scan() {
     IrqGuard guard;
@@ -38,11 +107,11 @@ void remote_scan() {
     reschedule_locked();
 }
 
-int remote_wait(const std::uint32_t* word, std::int64_t timeout_ns) {
+int remote_wait(std::uint32_t* word, std::int64_t timeout_ns) {
     if (!remote_wait_possible()) return -EPERM;
     IrqGuard guard;
     // Set before we parked: no need to wait (the ring may already be spent).
-    if (__atomic_load_n(word, __ATOMIC_ACQUIRE) != 0) return 0;
+    if (word_granted(__atomic_load_n(word, __ATOMIC_ACQUIRE))) return 0;
     if (timeout_ns == 0) return -ETIMEDOUT;
     Tcb* cur = g_k.current;
     cur->rword = word;

@@ -8,6 +8,8 @@
 
 #include <cstdint>
 
+#include "port.hpp"
+
 namespace chm::kernel {
 
 // The mailbox vector the kernel reserves for grants (chimera/irq.h 0..31).
@@ -22,14 +24,44 @@ bool remote_wait_possible();
 // measures the stack's high-water mark).
 int remote_waiter_priority();
 
-// Park the calling task until *word != 0, or `timeout_ns` passes (< 0: no
+// What a granter needs to decide whether waking the caller must interrupt
+// its RTPU (port::RingFor), recorded beside the word it waits on:
+//  * its id as this RTPU publishes it while it runs (never 0; 0 when the
+//    caller is not a task that can park);
+//  * its urgency on the scale this RTPU publishes for the running task.
+//    Under FIXED the scale is the priority, so a grant to a waiter that
+//    does not outrank the running task waits for the next switch. Under
+//    the other policies the order is not a number another process can
+//    compare (deadlines, laxity): the waiter's urgency is the highest and
+//    the running task's the lowest, so every grant interrupts, except one
+//    for the running task itself.
+std::uint32_t remote_waiter_id();
+std::uint32_t remote_waiter_urgency();
+
+// Publish the running task (g_k.current) on the RTPU's doorbell: called at
+// every switch, and when the doorbell is bound. Mask held.
+void publish_running_locked();
+
+// Park the calling task until word_granted(*word), or `timeout_ns` passes (< 0: no
 // limit). Returns 0 (word set), -ETIMEDOUT, -EINTR (a user signal) or
 // -EPERM (not a task that can park: use a futex instead).
-int remote_wait(const std::uint32_t* word, std::int64_t timeout_ns);
+int remote_wait(std::uint32_t* word, std::int64_t timeout_ns);
 
 // Wake every parked task whose word is set. Mask held (the grant vector's
 // handler), or from task context through remote_scan().
 void remote_scan_locked();
 void remote_scan();
+
+// A word's value while its waiter's RTPU polls it in its idle loop: the
+// granter's exchange that finds it knows the poll will see the grant, and
+// rings no doorbell. Never a grant value. Set and cleared only by the idle
+// loop of the waiter's own RTPU, around its poll (no task runs meanwhile).
+inline constexpr std::uint32_t kWordWatched = UINT32_MAX;
+inline bool word_granted(std::uint32_t v) { return v != 0 && v != kWordWatched; }
+
+// True when some task waits on a word (mask held).
+bool remote_waiting_locked();
+// The idle poll's watch over those words (port::IdleWatch).
+extern const port::IdleWatch kRemoteWatch;
 
 }  // namespace chm::kernel

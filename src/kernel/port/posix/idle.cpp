@@ -17,9 +17,11 @@ namespace chm::port {
 namespace {
 
 std::uint32_t g_own_pending = 0, g_own_seq = 0, g_own_state = kDbRunning;
-const Doorbell kOwnDoorbell{&g_own_pending, &g_own_seq, &g_own_state, false};
+const Doorbell kOwnDoorbell{&g_own_pending, &g_own_seq, &g_own_state, nullptr, nullptr, false};
 Doorbell g_db = kOwnDoorbell;
-std::uint32_t g_signals_sent = 0;  // 32-bit: a 64-bit atomic is a libatomic call on m68k
+std::uint32_t g_rings_sent = 0, g_signals_sent = 0;  // 32-bit: a 64-bit atomic is a libatomic call on m68k
+// What this RTPU last published (its own copy: no read of the shared line).
+std::uint32_t g_published_running = 0, g_published_urgency = 0;
 
 std::uint32_t load(const std::uint32_t* w) { return __atomic_load_n(w, __ATOMIC_SEQ_CST); }
 void store(std::uint32_t* w, std::uint32_t v) { __atomic_store_n(w, v, __ATOMIC_SEQ_CST); }
@@ -35,8 +37,35 @@ void doorbell_bump_from_signal() { __atomic_fetch_add(g_db.seq, 1, __ATOMIC_SEQ_
 void doorbell_use(const Doorbell* db) {
     const std::uint32_t moved = __atomic_exchange_n(g_db.pending, 0, __ATOMIC_SEQ_CST);
     g_db = db ? *db : kOwnDoorbell;
+    g_db_publishes = g_db.running && g_db.urgency;
+    if (g_db_publishes) {
+        // Nothing known yet: every ring interrupts until the kernel publishes.
+        g_published_running = kRunningUnknown;
+        g_published_urgency = 0;
+        store(g_db.urgency, 0);
+        store(g_db.running, kRunningUnknown);
+    }
     store(g_db.state, kDbRunning);
     if (moved) __atomic_fetch_or(g_db.pending, moved, __ATOMIC_SEQ_CST);
+}
+
+void doorbell_publish_locked(std::uint32_t running, std::uint32_t urgency) {
+    if (!g_db_publishes) return;
+    if (running == g_published_running && urgency == g_published_urgency) return;
+    const bool may_matter = running != g_published_running || urgency < g_published_urgency;
+    g_published_running = running;
+    g_published_urgency = urgency;
+    __atomic_store_n(g_db.urgency, urgency, __ATOMIC_RELAXED);
+    if (!may_matter) {
+        __atomic_store_n(g_db.running, running, __ATOMIC_RELEASE);
+        return;
+    }
+    // Against doorbell_ring: it sets `pending` then reads what we publish;
+    // we publish then read `pending`. One of the two sees the other, so a
+    // ring that skipped its signal for the task we leave is taken here.
+    store(g_db.running, running);
+    // (To the idle loop, running 0: it dispatches `pending` by itself.)
+    if (load(g_db.pending) && running) irq_mark_pending(kPendingRing);
 }
 
 const Doorbell& doorbell() { return g_db; }
@@ -46,8 +75,11 @@ std::uint32_t doorbell_take() {
     return __atomic_exchange_n(g_db.pending, 0, __ATOMIC_SEQ_CST);
 }
 
-void doorbell_ring(const Doorbell& db, std::uint32_t bits, int pid, int tid) {
-    if (bits) __atomic_fetch_or(db.pending, bits, __ATOMIC_SEQ_CST);
+void doorbell_ring(const Doorbell& db, std::uint32_t bits, int pid, int tid, RingFor why) {
+    if (bits) {
+        __atomic_fetch_or(db.pending, bits, __ATOMIC_SEQ_CST);
+        __atomic_fetch_add(&g_rings_sent, 1, __ATOMIC_RELAXED);
+    }
     __atomic_fetch_add(db.seq, 1, __ATOMIC_SEQ_CST);
     switch (load(db.state)) {
     case kDbSleeping:
@@ -55,7 +87,18 @@ void doorbell_ring(const Doorbell& db, std::uint32_t bits, int pid, int tid) {
         break;
     case kDbPolling:
         break;  // it sees `pending` or `seq` change within its poll
-    default:    // running tasks, or asleep in ppoll: interrupt it
+    case kDbRunning:
+        // It runs the very task we wake, or one at least as urgent: the
+        // vector waits for its next switch (doorbell_publish_locked).
+        if (bits && db.running && db.urgency) {
+            const std::uint32_t running = load(db.running);
+            if (running == 0) break;  // between tasks: it looks at `pending` first
+            if (running != kRunningUnknown &&
+                (why.task == running || why.urgency <= load(db.urgency)))
+                break;
+        }
+        [[fallthrough]];
+    default:  // asleep in ppoll, or running something less urgent: interrupt it
         if (tid > 0) {
             syscall(SYS_tgkill, pid, tid, timer_signal());
             __atomic_fetch_add(&g_signals_sent, 1, __ATOMIC_RELAXED);
@@ -64,17 +107,26 @@ void doorbell_ring(const Doorbell& db, std::uint32_t bits, int pid, int tid) {
     }
 }
 
+std::uint32_t doorbell_rings_sent() { return __atomic_load_n(&g_rings_sent, __ATOMIC_RELAXED); }
 std::uint32_t doorbell_signals_sent() { return __atomic_load_n(&g_signals_sent, __ATOMIC_RELAXED); }
 
-void idle_wait_locked(std::uint64_t poll_ns) {
+void idle_wait_locked(std::uint64_t poll_ns, const IdleWatch* watch) {
     const std::uint32_t seen = load(g_db.seq);
     if (g_irq.pending || load(g_db.pending)) return;
     if (poll_ns) {
-        // Stay in user space a little: a ring from a busy peer then costs
-        // no system call on either side.
+        // Stay in user space a little: a ring from a busy peer, or a grant
+        // to a watched word, then costs no system call on either side.
         store(g_db.state, kDbPolling);
+        bool woke = watch && watch->begin();
         const std::uint64_t end = now_ns() + poll_ns;
-        while (load(g_db.seq) == seen && !g_irq.pending && now_ns() < end) relax();
+        for (unsigned n = 0; !woke && load(g_db.seq) == seen && !g_irq.pending; ++n) {
+            if (watch && watch->woken()) break;
+            if ((n & 15) == 0 && now_ns() >= end) break;
+            relax();
+        }
+        // Unwatched before any sleep: a grant from here on rings.
+        if (watch && watch->end()) woke = true;
+        if (woke) return store(g_db.state, kDbRunning);
     }
     store(g_db.state, kDbSleeping);
     // The timer handler and every ring bump `seq`, so one that comes after

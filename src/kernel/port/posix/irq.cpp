@@ -19,9 +19,9 @@ void irq_take_pending() {
         g_irq.nest = 1;
         __atomic_signal_fence(__ATOMIC_SEQ_CST);
         while (g_irq.pending) {
-            g_irq.pending = 0;
+            const std::uint32_t why = irq_take_pending_bits();
             __atomic_signal_fence(__ATOMIC_SEQ_CST);
-            if (g_pending_hook) g_pending_hook();
+            if (g_pending_hook) g_pending_hook(why);
         }
         __atomic_signal_fence(__ATOMIC_SEQ_CST);
         g_irq.nest = 0;

@@ -38,7 +38,7 @@ void on_timer(int, siginfo_t*, void* ucontext) {
     }
     const int saved_errno = errno;
     if (g_irq.nest != 0) {
-        g_irq.pending = 1;
+        irq_mark_pending(kPendingTick);
         doorbell_bump_from_signal();
     } else {
         g_irq.nest = 1;
@@ -63,7 +63,7 @@ void on_timer(int, siginfo_t*, void* ucontext) {
             // long library call (a big memset) backs the retry off, 20 µs
             // doubling up to 320 µs, so retries cannot eat the CPU when a
             // signal costs as much as the retry period (virtual machines).
-            g_irq.pending = 1;
+            irq_mark_pending(kPendingTick);
             ++g_deferred;
             const unsigned shift = g_defer_streak < 4 ? g_defer_streak : 4;
             ++g_defer_streak;
@@ -91,7 +91,8 @@ void irq_restore_no_switch() {
     const std::uint32_t n = g_irq.nest - 1;
     g_irq.nest = n;
     if (n == 0 && g_irq.pending) {
-        g_irq.pending = 0;
+        // A tick or a ring: the retry's tick dispatches either.
+        irq_take_pending_bits();
         timer_arm_locked(now_ns() + kPreemptRetryNs);
     }
 }
