@@ -1,7 +1,7 @@
 /* Chimera backplane: the one mmap'd file that every RTPU and host process
  * of a system shares, as Chimera II's boards shared a VMEbus. It holds the
  * RTPU table, express-mail rings, the name registry, one local-memory
- * window per RTPU and common memory (docs/architecture.md, "Backplane").
+ * window per RTPU and common memory (docs/backplane.md, "Backplane").
  *
  * A process attaches once: a chimera-rtpu process joins as RTPU n
  * (chm_bp_join), any other program attaches as a host (chm_bp_attach_host).

@@ -1,5 +1,5 @@
 /* Chimera RTPUs seen from anywhere on the backplane: calls that act on
- * another RTPU through its express mail (docs/architecture.md, "RTPU
+ * another RTPU through its express mail (docs/backplane.md, "RTPU
  * processes and express mail").
  *
  * Each RTPU (a chimera-rtpu process) runs a server task that serves a ring

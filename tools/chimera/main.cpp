@@ -1,5 +1,5 @@
 // chimera: start, show, stop and remove a whole Chimera system on one
-// backplane (docs/architecture.md, "RTPU processes and express mail").
+// backplane (docs/backplane.md, "RTPU processes and express mail").
 //
 //   chimera start  [--backplane PATH] [--rtpus N] [--program RTPU:PATH[:ARG...]]...
 //                  [--policy P] [--rt-priority P] [--pin] [--lock-memory]

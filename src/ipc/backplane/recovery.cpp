@@ -5,7 +5,7 @@
 // the slot is RECOVERING and its recoverer lives. If the recoverer dies too,
 // the next survivor takes over; every step below is idempotent.
 //
-// What happens to a dead slot's things (docs/architecture.md, Backplane):
+// What happens to a dead slot's things (docs/backplane.md, Backplane):
 //  * locks it held: robbed and repaired (arenas rebuilt, half-changed
 //    registry entries finished or undone); user spin-locks it held are
 //    robbed lazily by their next locker, who gets -EOWNERDEAD;
