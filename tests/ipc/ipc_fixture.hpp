@@ -24,6 +24,7 @@
 #include <unistd.h>
 
 #include "chimera/bp.h"
+#include "../private_dir.hpp"
 
 namespace chm::test {
 
@@ -80,9 +81,8 @@ inline chm_bp_config_t small_config() {
 class IpcTest : public ::testing::Test {
 protected:
     void SetUp() override {
-        char tmpl[] = "/dev/shm/chm-ipc-XXXXXX";
-        ASSERT_NE(mkdtemp(tmpl), nullptr) << strerror(errno);
-        dir_ = tmpl;
+        dir_ = make_private_dir("chm-ipc-");
+        ASSERT_FALSE(dir_.empty()) << strerror(errno);
         path_ = dir_ + "/test.bp";
     }
     void TearDown() override {
@@ -94,24 +94,8 @@ protected:
         children_.clear();
         remove_dir();
     }
-    void remove_dir() {
-        if (DIR* d = opendir(dir_.c_str())) {
-            while (dirent* e = readdir(d))
-                if (std::strcmp(e->d_name, ".") && std::strcmp(e->d_name, ".."))
-                    unlink((dir_ + "/" + e->d_name).c_str());
-            closedir(d);
-        }
-        rmdir(dir_.c_str());
-    }
-    std::vector<std::string> dir_entries() {
-        std::vector<std::string> out;
-        if (DIR* d = opendir(dir_.c_str())) {
-            while (dirent* e = readdir(d))
-                if (std::strcmp(e->d_name, ".") && std::strcmp(e->d_name, "..")) out.push_back(e->d_name);
-            closedir(d);
-        }
-        return out;
-    }
+    void remove_dir() { remove_private_dir(dir_); }
+    std::vector<std::string> dir_entries() { return private_dir_entries(dir_); }
     void create(const chm_bp_config_t& c = small_config()) {
         ASSERT_EQ(chm_bp_create(path_.c_str(), &c), 0) << chm_bp_last_error();
     }

@@ -67,14 +67,7 @@ protected:
     // not what these tests are about).
     static chm_deadline_action keep_going(const chm_deadline_info_t*, void*) { return CHM_DL_CONTINUE; }
     static void spawn_task(void (*fn)(void*), void* arg, const char* name, int prio, std::uint64_t period) {
-        chm_task_attr_t a;
-        chm_task_attr_init(&a);
-        a.name = name;
-        a.priority = prio;
-        a.period_ns = period;
-        if (period) a.on_deadline = keep_going;
-        chm_tid_t id;
-        if (chm_task_spawn(&id, fn, arg, &a)) _exit(104);
+        if (test::spawn_task(fn, arg, name, prio, period, keep_going) == CHM_TID_NONE) _exit(104);
     }
 };
 

@@ -128,7 +128,11 @@ volatile int g_n_woken = 0;
 void ranked_waiter(void* arg) {
     chm_rsem_t* s = nullptr;
     chm_rsem_open("sem", &s);
-    if (chm_rsem_p_timed(s, kWait) == 0) g_order[g_n_woken++] = int(reinterpret_cast<intptr_t>(arg));
+    if (chm_rsem_p_timed(s, kWait) == 0) {
+        const int k = g_n_woken;
+        g_order[k] = int(reinterpret_cast<intptr_t>(arg));
+        g_n_woken = k + 1;
+    }
 }
 void late_urgent(void*) {
     chm_task_pause_until(chm_time_now() + 20000000);  // arrives second

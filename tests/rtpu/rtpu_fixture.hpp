@@ -25,6 +25,7 @@
 
 #include "chimera/bp.h"
 #include "chimera/rtpu.h"
+#include "../private_dir.hpp"
 
 namespace chm::test {
 
@@ -61,9 +62,8 @@ struct Outcome {
 class RtpuTest : public ::testing::Test {
 protected:
     void SetUp() override {
-        char tmpl[] = "/dev/shm/chm-rtpu-XXXXXX";
-        ASSERT_NE(mkdtemp(tmpl), nullptr) << strerror(errno);
-        dir_ = tmpl;
+        dir_ = make_private_dir("chm-rtpu-");
+        ASSERT_FALSE(dir_.empty()) << strerror(errno);
         bp_ = dir_ + "/test.bp";
         chm_rtpu_timeout_set(0);
     }
@@ -82,13 +82,7 @@ protected:
             waitpid(p, nullptr, 0);
         }
         children_.clear();
-        if (DIR* d = opendir(dir_.c_str())) {
-            while (dirent* e = readdir(d))
-                if (std::strcmp(e->d_name, ".") && std::strcmp(e->d_name, ".."))
-                    unlink((dir_ + "/" + e->d_name).c_str());
-            closedir(d);
-        }
-        rmdir(dir_.c_str());
+        remove_private_dir(dir_);
     }
 
     // A backplane like chimera start makes (1 KiB records), and attach.
