@@ -78,6 +78,48 @@ TEST_F(IpcMsgqRobust, KilledWaitersAreRemovedAndTheQueueKeepsWorking) {
     EXPECT_EQ(check(q), "");
 }
 
+// A recoverer that dies mid-recovery holding a queue's lock under the dead
+// slot's recovery token: the survivor that takes the recovery over holds
+// that token now, so the lock is its own. It must purge the dead slot's
+// waiter (before, it waited for itself until the 5 s timeout, gave up and
+// left the record: 1 in ~10 runs under qemu, where a killed RTPU was
+// often the first to recover its dead peer).
+TEST_F(IpcMsgqRobust, ATakenOverRecoveryAdoptsTheLockItsDeadRecovererHeld) {
+    create();
+    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
+    chm_msgq_t* q = make_queue("rx", CHM_MSGQ_FIFO, 8, 4);
+    ASSERT_NE(q, nullptr);
+    const pid_t waiter = spawn([&] {
+        if (chm_bp_join(path_.c_str(), 1, nullptr)) return 1;
+        chm_msgq_t* h = nullptr;
+        char buf[8];
+        if (chm_msgq_open("rx", &h)) return 2;
+        chm_msgq_receive(h, buf, sizeof buf, nullptr);
+        return 3;
+    });
+    ASSERT_TRUE(wait_for([&] { return info(q).receivers_waiting == 1; }));
+    const pid_t gone = spawn([] { return 0; });  // a recoverer that has died
+    ASSERT_EQ(reap(gone), 0);
+    // What the dead recoverer left: slot 1 RECOVERING under its name, the
+    // queue's lock held by slot 1's recovery token.
+    const bp::View& v = *bp::current();
+    bp::RtpuEntry* e = v.rtpu(1);
+    std::uint32_t st = e->status.load();
+    ASSERT_EQ(bp::status_state(st), bp::SlotState::Running);
+    const std::uint32_t gen = bp::status_gen(st);
+    reinterpret_cast<QueueHeader*>(q)->lock.token.store(bp::make_token(1, gen, true));
+    e->recoverer_start_lo = 1;
+    e->recoverer_pid.store(std::uint32_t(gone));
+    ASSERT_TRUE(e->status.compare_exchange_strong(st, bp::make_status(gen, bp::SlotState::Recovering)));
+    kill9(waiter);
+    // This process's monitor finds the recoverer dead and takes over.
+    ASSERT_TRUE(wait_slot_state(1, CHM_BP_DEAD, 20000));
+    EXPECT_EQ(info(q).receivers_waiting, 0u) << "the dead slot's waiter was left in the queue";
+    EXPECT_EQ(check(q), "");
+    const std::uint32_t one = 1;
+    EXPECT_EQ(chm_msgq_send(q, 0, 0, &one, sizeof one), 0) << "the queue's lock was left held";
+}
+
 TEST_F(IpcMsgqRobust, AGrantHeldByAKilledWaiterPassesOn) {
     create();
     ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);

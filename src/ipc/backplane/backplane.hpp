@@ -122,6 +122,12 @@ int lock_acquire(const View& v, Lock* l, std::uint32_t me, std::uint64_t poll_ns
                  std::uint64_t timeout_ns);
 // One attempt: 0, -EOWNERDEAD (robbed a dead holder) or -EBUSY.
 int lock_try(const View& v, Lock* l, std::uint32_t me);
+// lock_acquire for an object's recovery under recovery token `rt`: a lock
+// that `rt` holds already is ours (a recoverer that died mid-recovery held
+// it, and this process took its work over under the same token), returned
+// as -EOWNERDEAD: check l->dirty and repair. Without this, the takeover
+// waited for itself until the timeout and left the dead slot's waiters.
+int lock_acquire_recovery(const View& v, Lock* l, std::uint32_t rt);
 void lock_release(Lock* l);
 // Set before changing the structure a lock guards, clear after.
 void lock_mark_dirty(Lock* l);

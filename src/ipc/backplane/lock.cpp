@@ -99,6 +99,11 @@ int lock_acquire(const View& v, Lock* l, std::uint32_t me, std::uint64_t poll_ns
     }
 }
 
+int lock_acquire_recovery(const View& v, Lock* l, std::uint32_t rt) {
+    if (l->token.load(std::memory_order_acquire) == rt) return -EOWNERDEAD;
+    return lock_acquire(v, l, rt, kInternalPollNs, kInternalTimeoutNs);
+}
+
 void lock_release(Lock* l) {
     l->owner_task.store(0, std::memory_order_relaxed);
     l->token.store(0, std::memory_order_release);

@@ -132,14 +132,16 @@ bool recover_slot(const View& v, std::uint32_t slot, std::uint32_t gen) {
     case SlotState::Running:
     case SlotState::Leaving:
         if (!slot_holder_dead(v, slot, st)) return false;
-        // The recoverer record is read only while RECOVERING; write it
-        // before the CAS so it is never empty then, and again after it in
-        // case a racing loser overwrote it.
-        e->recoverer_start_lo = me_start;
-        e->recoverer_pid.store(me, std::memory_order_release);
         if (!e->status.compare_exchange_strong(st, make_status(gen, SlotState::Recovering),
                                                std::memory_order_acq_rel))
             return false;
+        // Only the winner writes the recoverer record. (A loser that wrote
+        // it before its CAS could land after the winner's write and name
+        // itself: when the real recoverer then died, nobody took over, and
+        // a recovery waiting for its registry lock waited for ever.) Until
+        // this store the record is a finished recovery's (pid 0) or a dead
+        // one's: a survivor that reads it as dead confirms after 20 ms
+        // that it has not changed before taking over.
         e->recoverer_start_lo = me_start;
         e->recoverer_pid.store(me, std::memory_order_release);
         break;

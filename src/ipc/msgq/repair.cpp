@@ -190,7 +190,7 @@ void recover(const bp::View& v, std::uint32_t entry_index, std::uint32_t dead_sl
         if (e->owner.load(R) == dead) bp::registry_destroy_locked(v, entry_index, recovery_token);
         return;
     }
-    const int r = bp::lock_acquire(v, &q->lock, recovery_token, kLockPollNs, bp::kInternalTimeoutNs);
+    const int r = bp::lock_acquire_recovery(v, &q->lock, recovery_token);
     if (r == -ETIMEDOUT) return;  // a live holder: the next granter drops the dead waiters
     if (!geometry_ok(q, size)) q->broken.store(1, R);
     if (r == -EOWNERDEAD && q->lock.dirty.load(std::memory_order_acquire) && !q->broken.load(R)) rebuild_locked(q);

@@ -139,7 +139,7 @@ void rsem_recover(const View& v, std::uint32_t index, std::uint32_t dead_slot, s
              std::uint32_t rt) {
     auto* s = v.at<Rsem>(v.entry(index)->offset.load());
     if (s->magic.load() != kRsemMagic) return;
-    if (lock_acquire(v, &s->lock, rt, kInternalPollNs, kInternalTimeoutNs) == -ETIMEDOUT) return;
+    if (lock_acquire_recovery(v, &s->lock, rt) == -ETIMEDOUT) return;
     if (s->lock.dirty.load()) repair_locked(s);
     std::uint32_t passed = 0;
     for (Waiter& w : s->w) {
