@@ -14,7 +14,23 @@ namespace chm::test {
 namespace {
 
 using namespace ipc::msgq;
-using IpcMsgqRobust = MsgqTest;
+
+class IpcMsgqRobust : public MsgqTest {
+protected:
+    // A host process joined as RTPU `slot`, blocked on the futex in a
+    // receive from "rx" (it never returns 0).
+    pid_t spawn_receiver(int slot) {
+        const std::string path = path_;
+        return spawn([path, slot] {
+            if (chm_bp_join(path.c_str(), slot, nullptr)) return 1;
+            chm_msgq_t* h = nullptr;
+            char buf[8];
+            if (chm_msgq_open("rx", &h)) return 2;
+            chm_msgq_receive(h, buf, sizeof buf, nullptr);
+            return 3;
+        });
+    }
+};
 
 // Drain q (non-blocking): the first words of the messages, in order.
 std::vector<std::uint32_t> drain(chm_msgq_t* q) {
@@ -38,14 +54,7 @@ TEST_F(IpcMsgqRobust, KilledWaitersAreRemovedAndTheQueueKeepsWorking) {
     chm_msgq_t* q = make_queue("rx", CHM_MSGQ_FIFO, 8, 4);
     ASSERT_NE(q, nullptr);
     // A host process on the futex and an RTPU task parked, both in receive.
-    const pid_t host = spawn([&] {
-        if (chm_bp_join(path_.c_str(), 1, nullptr)) return 1;
-        chm_msgq_t* h = nullptr;
-        char buf[8];
-        if (chm_msgq_open("rx", &h)) return 2;
-        chm_msgq_receive(h, buf, sizeof buf, nullptr);
-        return 3;
-    });
+    const pid_t host = spawn_receiver(1);
     ASSERT_TRUE(wait_for([&] { return info(q).receivers_waiting == 1; }));
     const pid_t rtpu = spawn([&] {
         return run_rtpu(path_, 2, [&] {
@@ -89,14 +98,7 @@ TEST_F(IpcMsgqRobust, ATakenOverRecoveryAdoptsTheLockItsDeadRecovererHeld) {
     ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
     chm_msgq_t* q = make_queue("rx", CHM_MSGQ_FIFO, 8, 4);
     ASSERT_NE(q, nullptr);
-    const pid_t waiter = spawn([&] {
-        if (chm_bp_join(path_.c_str(), 1, nullptr)) return 1;
-        chm_msgq_t* h = nullptr;
-        char buf[8];
-        if (chm_msgq_open("rx", &h)) return 2;
-        chm_msgq_receive(h, buf, sizeof buf, nullptr);
-        return 3;
-    });
+    const pid_t waiter = spawn_receiver(1);
     ASSERT_TRUE(wait_for([&] { return info(q).receivers_waiting == 1; }));
     const pid_t gone = spawn([] { return 0; });  // a recoverer that has died
     ASSERT_EQ(reap(gone), 0);

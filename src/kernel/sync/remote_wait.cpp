@@ -66,35 +66,28 @@ bool remote_waiting_locked() { return g_remote.head != nullptr; }
 
 namespace {
 
-// Mark every parked task's word watched (0 -> kWordWatched); true when one
-// is granted already. Granters exchange the word, so each either finds the
-// mark (and leaves the wake-up to this poll) or comes after end() and rings.
-bool watch_begin() {
+// Move every parked task's word from `from` to `to` where it still holds
+// `from`; true when one holds a grant instead. Granters exchange the word,
+// so each either finds the mark (and leaves the wake-up to the poll) or
+// comes after the unmarking and rings.
+bool move_words(std::uint32_t from, std::uint32_t to) {
     bool granted = false;
     for (const Tcb* t = g_remote.head; t; t = t->wnext) {
-        std::uint32_t expect = 0;
-        if (!__atomic_compare_exchange_n(t->rword, &expect, kWordWatched, false, __ATOMIC_ACQ_REL,
-                                         __ATOMIC_ACQUIRE))
+        std::uint32_t expect = from;
+        if (!__atomic_compare_exchange_n(t->rword, &expect, to, false, __ATOMIC_ACQ_REL, __ATOMIC_ACQUIRE))
             granted |= word_granted(expect);
     }
     return granted;
 }
+
+// Mark the words watched before the poll; unmark them after it.
+bool watch_begin() { return move_words(0, kWordWatched); }
+bool watch_end() { return move_words(kWordWatched, 0); }
 
 bool watch_woken() {
     for (const Tcb* t = g_remote.head; t; t = t->wnext)
         if (word_granted(__atomic_load_n(t->rword, __ATOMIC_ACQUIRE))) return true;
     return false;
-}
-
-// Unmark (kWordWatched -> 0); true when one was granted meanwhile.
-bool watch_end() {
-    bool granted = false;
-    for (const Tcb* t = g_remote.head; t; t = t->wnext) {
-        std::uint32_t expect = kWordWatched;
-        if (!__atomic_compare_exchange_n(t->rword, &expect, 0, false, __ATOMIC_ACQ_REL, __ATOMIC_ACQUIRE))
-            granted |= word_granted(expect);
-    }
-    return granted;
 }
 
 }  // namespace
