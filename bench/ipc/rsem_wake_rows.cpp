@@ -14,9 +14,11 @@
 //    idle (idle_poll_ns 0), beside the raw shared futex ping-pong across
 //    cores;
 //  * rsem_handoff_polling: the same ping-pong with idle_poll_ns on both
-//    RTPUs: an idle RTPU polls its doorbell before sleeping, so a V costs
-//    no system call on either side; beside the cache-line ping-pong floor.
+//    RTPUs: a waiting task with nothing else to run spins on its grant
+//    word before it parks, so a V costs no ring, switch or system call on
+//    either side; beside the cache-line ping-pong floor.
 #include <cstdint>
+#include <cstdio>
 #include <string>
 
 #include "../harness.hpp"
@@ -24,6 +26,7 @@
 #include "chimera/bp.h"
 #include "chimera/rsem.h"
 #include "chimera/shm.h"
+#include "port.hpp"  // the doorbell's ring counters
 #include "rtpu.hpp"
 
 namespace chm::bench {
@@ -197,8 +200,13 @@ void rsem_xrtpu(Session& s, const std::string& row, std::uint64_t poll_ns, const
                 "process) pinned " + s.cpu_name(1) + ", a priority-10 task on each, FIXED policy, " + mode +
                 "; counting semaphores in common memory; chm_rsem_v on one RTPU until the task it "
                 "wakes on the other returns from chm_rsem_p; RT/2 of the ping-pong";
-            // The caller's side alone: the V that grants and rings the other RTPU.
+            // The caller's side alone: the V that grants and rings the other
+            // RTPU; and how often a V rang and signalled it.
+            const std::uint32_t rings0 = chm::port::doorbell_rings_sent();
+            const std::uint32_t signals0 = chm::port::doorbell_signals_sent();
+            std::uint64_t vs = 0;
             v_call = ipcb::measure_part(s, 0.25, [&](std::uint64_t n) {
+                vs += n;
                 std::uint64_t sum = 0;
                 for (std::uint64_t i = 0; i < n; ++i) {
                     const std::uint64_t t0 = ticks();
@@ -208,7 +216,15 @@ void rsem_xrtpu(Session& s, const std::string& row, std::uint64_t poll_ns, const
                 }
                 return clk.ns(sum) - double(n) * clk.pair_ns;
             });
-            s.time_ops(row, cfg + "; the V call alone on the caller's side: " + kb::fmt_ns(v_call.median),
+            const auto per_v = [&](std::uint32_t count) {
+                char b[32];
+                std::snprintf(b, sizeof b, "%.3f", vs ? double(count) / double(vs) : 0.0);
+                return std::string(b);
+            };
+            const std::string rang = "; per V on this side: " +
+                                     per_v(chm::port::doorbell_rings_sent() - rings0) + " rings, " +
+                                     per_v(chm::port::doorbell_signals_sent() - signals0) + " signals";
+            s.time_ops(row, cfg + "; the V call alone on the caller's side: " + kb::fmt_ns(v_call.median) + rang,
                        [&](std::uint64_t n) {
                            for (std::uint64_t i = 0; i < n; ++i) {
                                check_rsem(chm_rsem_v(ping), "chm_rsem_v");
@@ -232,8 +248,9 @@ CHM_BENCH_MEASUREMENT(rsem_wake_remote_row, "remote_semv_wake_remote");
 void rsem_polling_row(Session& s) {
     rsem_xrtpu(s, "rsem_handoff_polling", kPollNs,
                "idle_poll_ns " + std::to_string(kPollNs / 1000) +
-                   " us on both (an idle RTPU polls its doorbell that long before sleeping: a V "
-                   "stores the grant and the pending bit, no system call on either side)");
+                   " us on both (a task whose P must wait, with nothing else to run on its RTPU, "
+                   "spins on its grant word that long before it parks: a V stores the grant and "
+                   "rings nothing, no switch or system call on either side)");
 }
 CHM_BENCH_MEASUREMENT(rsem_polling_row, "rsem_handoff_polling");
 

@@ -49,7 +49,14 @@ typedef struct chm_kernel_config {
                            * this long before sleeping: a wake-up from a busy
                            * peer (remote V, message) then costs no system
                            * call on either side, at the price of that much
-                           * CPU per idle period. Default 0 (sleep at once) */
+                           * CPU per idle period. A task whose remote wait
+                           * (chm_rsem_p, chm_msgq_*) must block while no
+                           * other task is ready does this poll itself, on
+                           * its grant, before it parks: a grant then costs
+                           * no switch either. It stays preemptible; another
+                           * task made ready ends the poll, a user signal
+                           * interrupts the wait (-EINTR). Default 0 (sleep
+                           * at once) */
 } chm_kernel_config_t;
 
 /* Fill `cfg` with the defaults above. */

@@ -90,6 +90,8 @@ struct Tcb {
     // User signals.
     std::uint32_t sig_pending = 0;
     std::uint32_t sig_blocked = 0;
+    std::uint32_t sigs_taken = 0;    // handlers run (a spinning remote wait's -EINTR)
+    std::uint32_t sigs_at_wait = 0;  // sigs_taken when a planned spin's record was written
     chm_usig_handler_t sig_handler[CHM_USIG_MAX + 1] = {};
     void* sig_arg[CHM_USIG_MAX + 1] = {};
 
@@ -169,6 +171,9 @@ struct Kernel {
     bool initialised = false;
     bool running = false;
     bool stopping = false;
+    // A task spun out idle_poll_ns before it parked (sync/remote_wait.cpp):
+    // the idle loop sleeps without polling again.
+    bool idle_poll_spent = false;
     int stop_code = 0;
     chm_kernel_config_t cfg{};
 

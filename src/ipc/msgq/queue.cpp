@@ -125,15 +125,16 @@ std::int32_t my_priority(bool task) { return task ? kernel::remote_waiter_priori
 
 WaiterId recorded(const Waiter* w) { return WaiterId{w->task.load(R), w->urgency.load(R)}; }
 
-// A free record for the caller, or nullptr (all taken: the caller polls).
+// A free record for the caller, its word at `initial_word` (wait_word_initial),
+// or nullptr (all taken: the caller polls).
 Waiter* register_locked(QueueHeader* q, std::uint32_t state, std::uint32_t me, WaiterId who,
-                        std::int32_t prio) {
+                        std::int32_t prio, std::uint32_t initial_word) {
     for (std::uint32_t i = 0; i < q->max_waiters; ++i) {
         Waiter* w = waiter_at(q, i);
         if (w->state.load(R) != kWaiterFree) continue;
         std::uint32_t t = bump(q->next_ticket, 1);
         while (!kernel::word_granted(t)) t = bump(q->next_ticket, 1);  // a grant value
-        w->word.store(0, R);
+        w->word.store(initial_word, R);
         w->ticket.store(t, R);
         w->token.store(me, R);
         w->task.store(who.task, R);
@@ -229,8 +230,9 @@ int run(const bp::Attachment* a, QueueHeader* q, const Op& op, std::int64_t time
             }
             left = timeout_ns - std::int64_t(spent);
         }
+        const std::uint32_t initial = wait_word_initial();
         bp::lock_mark_dirty(&q->lock);
-        Waiter* w = register_locked(q, Op::kMine, a->token, who, prio);
+        Waiter* w = register_locked(q, Op::kMine, a->token, who, prio, initial);
         const std::uint32_t ticket = w ? w->ticket.load(R) : 0;
         bp::lock_clear_dirty(&q->lock);
         unlock_queue(q);

@@ -291,8 +291,9 @@ int chm_rsem_p_timed(chm_rsem_t* h, int64_t timeout_ns) {
         set_error("chm_rsem_p: %d tasks wait already", CHM_RSEM_WAITERS);
         return -ENOSPC;
     }
+    const std::uint32_t initial = wait_word_initial();
     lock_mark_dirty(&s->lock);
-    me->grant.store(0);
+    me->grant.store(initial);
     me->slot.store(a->slot);
     me->gen.store(a->gen & 0xFFFFFF);
     me->prio.store(std::uint32_t(chm::kernel::remote_waiter_priority()));

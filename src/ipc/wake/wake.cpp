@@ -97,6 +97,8 @@ int wait_word(std::uint32_t* word, std::int64_t timeout_ns) {
     return 0;
 }
 
+std::uint32_t wait_word_initial() { return kernel::remote_wait_initial_word(); }
+
 bool waits_as_task() { return kernel::remote_wait_possible(); }
 
 WaiterId waiter_self() {

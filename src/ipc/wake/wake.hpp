@@ -27,6 +27,12 @@ void wake_unbind_kernel();
 // or vector; -ENOTCONN not attached; -ESRCH the slot runs no process.
 int wake_ring(std::uint32_t slot, int vector);
 
+// What a waiter stores into its word when it writes its record (before a
+// granter can see it): kernel::kWordWatched when wait_word will spin on it
+// first (a task on an RTPU that polls and has nothing else to run), so a
+// grant then rings nothing; else 0.
+std::uint32_t wait_word_initial();
+
 // Wait until *word != 0: parks only the calling task on an RTPU, sleeps on
 // the word's futex on any other thread. timeout_ns < 0: no limit.
 // Returns 0, -ETIMEDOUT or -EINTR.

@@ -273,6 +273,7 @@ void deliver_pending_slow_locked() {
         if (!sigs) return;
         const int signo = __builtin_ctz(sigs);
         cur->sig_pending &= ~(1u << signo);
+        ++cur->sigs_taken;
         chm_usig_handler_t h = cur->sig_handler[signo];
         if (h) {
             void* a = cur->sig_arg[signo];

@@ -45,6 +45,7 @@ int idle_loop_locked() {
         if (g_k.cfg.virtual_clock) timers_run_locked(now);
         Tcb* head = sched_pick_locked(now);
         if (head) {
+            g_k.idle_poll_spent = false;  // it was for the last wait only
             if (io_watching_locked()) io_busy_arm_locked(now);
             schedule_locked();  // switches to it; returns when idle again
             continue;
@@ -60,12 +61,15 @@ int idle_loop_locked() {
             continue;
         }
         timer_program_locked(now);
-        if (g_k.cfg.idle_poll_ns && remote_waiting_locked()) {
+        // A task that spun out its wait before it parked did this poll.
+        const std::uint64_t poll_ns = g_k.idle_poll_spent ? 0 : g_k.cfg.idle_poll_ns;
+        g_k.idle_poll_spent = false;
+        if (poll_ns && remote_waiting_locked()) {
             // The poll watches the parked tasks' words: a grant needs no ring.
-            port::idle_wait_locked(g_k.cfg.idle_poll_ns, &kRemoteWatch);
+            port::idle_wait_locked(poll_ns, &kRemoteWatch);
             remote_scan_locked();
         } else {
-            port::idle_wait_locked(g_k.cfg.idle_poll_ns);
+            port::idle_wait_locked(poll_ns);
         }
         // A ring marked pending is dispatched at the top of the loop.
         if (port::irq_take_pending_bits() & port::kPendingTick) {

@@ -318,6 +318,8 @@ void doorbell_use(const Doorbell* db);
 const Doorbell& doorbell();
 // Take the pending vectors (cleared). Any context on the kernel thread.
 std::uint32_t doorbell_take();
+// True when vectors are pending (not taken). Any context on the kernel thread.
+bool doorbell_raised();
 // Raise `bits` on the RTPU behind `db` whose kernel thread is `tid` of
 // process `pid`, and wake it as its state requires (futex wake, directed
 // timer signal, or nothing while it polls). Any thread or process; async-

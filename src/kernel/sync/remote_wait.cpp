@@ -100,13 +100,110 @@ void remote_scan() {
     reschedule_locked();
 }
 
+namespace {
+
+// True while the RTPU has nothing to do but wait with the calling task: no
+// other task ready, no vector or tick pending, no signal or deadline miss
+// for the caller. Mask held.
+bool only_waiting_locked() {
+    const Tcb* cur = g_k.current;
+    if (port::g_irq.pending || port::doorbell_raised()) return false;
+    if ((cur->sig_pending & ~cur->sig_blocked) || cur->miss_pending) return false;
+    return !sched_pick_locked(now_cached_locked());
+}
+
+// Move `word` from `from` to `to`; true when it holds a grant instead.
+bool move_word(std::uint32_t* word, std::uint32_t from, std::uint32_t to) {
+    return !__atomic_compare_exchange_n(word, &from, to, false, __ATOMIC_ACQ_REL, __ATOMIC_ACQUIRE) &&
+           word_granted(from);
+}
+
+// How long the caller may spin before it parks (0: not at all): the idle
+// poll, when the RTPU polls and has nothing else to do. Mask held.
+std::uint64_t spin_limit_locked(std::int64_t timeout_ns) {
+    const std::uint64_t poll = g_k.cfg.idle_poll_ns;
+    if (!poll || timeout_ns == 0 || g_k.cfg.virtual_clock || io_watching_locked()) return 0;
+    if (!only_waiting_locked()) return 0;
+    return timeout_ns > 0 && std::uint64_t(timeout_ns) < poll ? std::uint64_t(timeout_ns) : poll;
+}
+
+// Before it parks, a task whose RTPU would otherwise go idle and poll
+// waits for its grant right here, its word marked watched (the granter
+// rings nothing): a grant then costs neither RTPU a switch, the idle
+// loop's watch or a scan. Interrupts stay enabled: a tick or a ring
+// preempts the spin as it would any task; a task made ready or a pending
+// vector ends it, and a user signal interrupts it as it would the wait.
+enum class Spun { kGranted, kOver, kSpent, kSignalled };
+
+// A user signal since the wait began (`taken`: the caller's sigs_taken
+// then): pending, or handled already at a preemption's return. Mask held.
+bool signalled_locked(std::uint32_t taken) {
+    const Tcb* cur = g_k.current;
+    return (cur->sig_pending & ~cur->sig_blocked) || cur->sigs_taken != taken;
+}
+
+Spun spin_watched(std::uint32_t* word, std::uint64_t end, std::uint32_t taken) {
+    for (unsigned n = 1;; ++n) {
+        if (word_granted(__atomic_load_n(word, __ATOMIC_ACQUIRE))) return Spun::kGranted;
+        if (port::g_irq.pending || (n & 15) == 0) {
+            IrqGuard guard;  // its release takes a pending tick (and may switch)
+            if (signalled_locked(taken)) return Spun::kSignalled;
+            if (!only_waiting_locked()) return Spun::kOver;
+            if (port::now_ns() >= end) return Spun::kSpent;
+        }
+        port::relax();
+    }
+}
+
+}  // namespace
+
+std::uint32_t remote_wait_initial_word() {
+    if (!remote_wait_possible()) return 0;
+    IrqGuard guard;
+    if (!spin_limit_locked(-1)) return 0;
+    // The wait begins here for user signals: the record is written next.
+    g_k.current->sigs_at_wait = g_k.current->sigs_taken;
+    return kWordWatched;
+}
+
 int remote_wait(std::uint32_t* word, std::int64_t timeout_ns) {
     if (!remote_wait_possible()) return -EPERM;
+    const std::uint32_t v = __atomic_load_n(word, __ATOMIC_ACQUIRE);
+    if (word_granted(v)) return 0;
+    Tcb* cur = g_k.current;
+    bool watched = v == kWordWatched;  // marked when the record was written
+    const std::uint32_t taken = watched ? cur->sigs_at_wait : cur->sigs_taken;
+    std::uint64_t spin_ns;
+    {
+        IrqGuard guard;
+        spin_ns = spin_limit_locked(timeout_ns);
+    }
+    Spun spun = Spun::kOver;
+    if (spin_ns) {
+        if (!watched && move_word(word, 0, kWordWatched)) return 0;
+        watched = true;
+        const std::uint64_t t0 = port::now_ns();
+        spun = spin_watched(word, t0 + spin_ns, taken);
+        if (spun == Spun::kGranted) return 0;
+        if (timeout_ns > 0) {  // the spin counts against the timeout
+            const std::uint64_t spent = port::now_ns() - t0;
+            timeout_ns = spent >= std::uint64_t(timeout_ns) ? 0 : timeout_ns - std::int64_t(spent);
+        }
+    }
+    // Unwatched before parking: a grant from here on rings.
+    if (watched && move_word(word, kWordWatched, 0)) return 0;
     IrqGuard guard;
     // Set before we parked: no need to wait (the ring may already be spent).
     if (word_granted(__atomic_load_n(word, __ATOMIC_ACQUIRE))) return 0;
+    // A signal during the spin (or since the record was written, when the
+    // spin was planned) interrupts the wait as it would the parked one.
+    if (watched && signalled_locked(taken)) {
+        deliver_pending_locked();
+        return -EINTR;
+    }
     if (timeout_ns == 0) return -ETIMEDOUT;
-    Tcb* cur = g_k.current;
+    // The RTPU polled already: its idle loop need not poll again first.
+    if (spun == Spun::kSpent) g_k.idle_poll_spent = true;
     cur->rword = word;
     cur->state = TaskState::Blocked;
     cur->interruptible = true;

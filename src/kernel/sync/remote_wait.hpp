@@ -43,9 +43,16 @@ std::uint32_t remote_waiter_urgency();
 void publish_running_locked();
 
 // Park the calling task until word_granted(*word), or `timeout_ns` passes (< 0: no
-// limit). Returns 0 (word set), -ETIMEDOUT, -EINTR (a user signal) or
+// limit). When the RTPU polls (idle_poll_ns) and has no other task ready,
+// the task first spins on the word for up to that long, in its own context
+// (preemptible), and parks only if no grant came. Returns 0 (word set), -ETIMEDOUT, -EINTR (a user signal) or
 // -EPERM (not a task that can park: use a futex instead).
 int remote_wait(std::uint32_t* word, std::int64_t timeout_ns);
+
+// The value a waiter's word should start at, written before a granter can
+// see it: kWordWatched when remote_wait will spin first (so a grant that
+// comes before the spin begins rings nothing either), else 0.
+std::uint32_t remote_wait_initial_word();
 
 // Wake every parked task whose word is set. Mask held (the grant vector's
 // handler), or from task context through remote_scan().
@@ -54,8 +61,11 @@ void remote_scan();
 
 // A word's value while its waiter's RTPU polls it in its idle loop: the
 // granter's exchange that finds it knows the poll will see the grant, and
-// rings no doorbell. Never a grant value. Set and cleared only by the idle
-// loop of the waiter's own RTPU, around its poll (no task runs meanwhile).
+// rings no doorbell. Never a grant value. Set and cleared only on the
+// waiter's own RTPU: by its idle loop around the poll (for parked tasks'
+// words; no task runs meanwhile), or by the waiting task itself while it
+// spins before it parks (remote_wait, when the RTPU polls and has nothing
+// else to run).
 inline constexpr std::uint32_t kWordWatched = UINT32_MAX;
 inline bool word_granted(std::uint32_t v) { return v != 0 && v != kWordWatched; }
 

@@ -70,6 +70,8 @@ void doorbell_publish_locked(std::uint32_t running, std::uint32_t urgency) {
 
 const Doorbell& doorbell() { return g_db; }
 
+bool doorbell_raised() { return load(g_db.pending) != 0; }
+
 std::uint32_t doorbell_take() {
     if (!load(g_db.pending)) return 0;  // the common case: no atomic write
     return __atomic_exchange_n(g_db.pending, 0, __ATOMIC_SEQ_CST);
