@@ -112,10 +112,13 @@ Waiter* most_urgent_locked(Rsem* s) {
 int give_locked(Rsem* s, Waiter** woken) {
     *woken = nullptr;
     if (Waiter* w = most_urgent_locked(s)) {
+        constexpr auto R = std::memory_order_relaxed;
         lock_mark_dirty(&s->lock);
-        w->state.store(kGranted);
+        s->nwaiting.store(s->nwaiting.load(R) - 1, R);
+        // Before the grant (whose exchange releases it): the waiter frees
+        // its record after seeing the grant, without the lock.
+        w->state.store(kGranted, R);
         const bool watched = store_grant(reinterpret_cast<std::uint32_t*>(&w->grant), 1);
-        s->nwaiting.fetch_sub(1);
         lock_clear_dirty(&s->lock);
         if (!watched) *woken = w;
         return 0;
@@ -125,7 +128,7 @@ int give_locked(Rsem* s, Waiter** woken) {
         return 0;
     }
     if (s->count.load() == UINT32_MAX) return -EOVERFLOW;
-    s->count.fetch_add(1);
+    s->count.store(s->count.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);  // lock held: no RMW
     return 0;
 }
 
@@ -270,7 +273,7 @@ int chm_rsem_p_timed(chm_rsem_t* h, int64_t timeout_ns) {
     Attachment* a = current();
     if (int r = lock(s)) return r;
     if (s->count.load() > 0) {  // the fast path: one lock, no system call
-        s->count.fetch_sub(1);
+        s->count.store(s->count.load(std::memory_order_relaxed) - 1, std::memory_order_relaxed);  // lock held
         unlock(s);
         return 0;
     }
@@ -291,18 +294,26 @@ int chm_rsem_p_timed(chm_rsem_t* h, int64_t timeout_ns) {
         set_error("chm_rsem_p: %d tasks wait already", CHM_RSEM_WAITERS);
         return -ENOSPC;
     }
+    // Everything local first, then the shared words in one short burst of
+    // plain stores (the unlock publishes them): a peer spinning on the lock
+    // steals its line between our writes, and each write after that costs
+    // a cache miss while we hold it.
     const std::uint32_t initial = wait_word_initial();
-    lock_mark_dirty(&s->lock);
-    me->grant.store(initial);
-    me->slot.store(a->slot);
-    me->gen.store(a->gen & 0xFFFFFF);
-    me->prio.store(std::uint32_t(chm::kernel::remote_waiter_priority()));
-    me->seq.store(s->seq.fetch_add(1) + 1);
+    const std::uint32_t prio = std::uint32_t(chm::kernel::remote_waiter_priority());
     const WaiterId who = waiter_self();
-    me->task.store(who.task);
-    me->urgency.store(who.urgency);
-    me->state.store(kWaiting);
-    s->nwaiting.fetch_add(1);
+    constexpr auto R = std::memory_order_relaxed;
+    lock_mark_dirty(&s->lock);
+    const std::uint32_t seq = s->seq.load(R) + 1;
+    s->seq.store(seq, R);
+    s->nwaiting.store(s->nwaiting.load(R) + 1, R);
+    me->grant.store(initial, R);
+    me->slot.store(a->slot, R);
+    me->gen.store(a->gen & 0xFFFFFF, R);
+    me->prio.store(prio, R);
+    me->seq.store(seq, R);
+    me->task.store(who.task, R);
+    me->urgency.store(who.urgency, R);
+    me->state.store(kWaiting, R);
     lock_clear_dirty(&s->lock);
     unlock(s);
 
