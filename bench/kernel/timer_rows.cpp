@@ -200,7 +200,8 @@ void sw_real(void* p) {
         const std::uint64_t now = mono_ns();
         a->gap_ns.push_back(clk.ns(t - a->last) - clk.pair_ns);
         a->late_ns.push_back(double(now) - double(chm_task_cycle_release()));
-        if (++a->done >= a->cycles || watchdog_fired()) {
+        a->done = a->done + 1;
+        if (a->done >= a->cycles || watchdog_fired()) {
             a->stop = true;
             return;
         }
@@ -222,7 +223,8 @@ void sw_virt_high(void* p) {
     for (;;) {
         const std::uint64_t t = ticks();
         a->gap_ns.push_back(clk.ns(t - a->last) - clk.pair_ns);
-        if (++a->done >= a->cycles) {
+        a->done = a->done + 1;
+        if (a->done >= a->cycles) {
             a->stop = true;
             return;
         }
