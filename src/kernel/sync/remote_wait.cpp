@@ -127,12 +127,8 @@ std::uint64_t spin_limit_locked(std::int64_t timeout_ns) {
     return timeout_ns > 0 && std::uint64_t(timeout_ns) < poll ? std::uint64_t(timeout_ns) : poll;
 }
 
-// Before it parks, a task whose RTPU would otherwise go idle and poll
-// waits for its grant right here, its word marked watched (the granter
-// rings nothing): a grant then costs neither RTPU a switch, the idle
-// loop's watch or a scan. Interrupts stay enabled: a tick or a ring
-// preempts the spin as it would any task; a task made ready or a pending
-// vector ends it, and a user signal interrupts it as it would the wait.
+// How a spin ended: granted, something else to run (or a tick or vector
+// pending), idle_poll_ns spent, or a user signal.
 enum class Spun { kGranted, kOver, kSpent, kSignalled };
 
 // A user signal since the wait began (`taken`: the caller's sigs_taken
@@ -142,6 +138,12 @@ bool signalled_locked(std::uint32_t taken) {
     return (cur->sig_pending & ~cur->sig_blocked) || cur->sigs_taken != taken;
 }
 
+// Before it parks, a task whose RTPU would otherwise go idle and poll
+// waits for its grant right here, its word marked watched (the granter
+// rings nothing): a grant then costs neither RTPU a switch, the idle
+// loop's watch or a scan. Interrupts stay enabled: a tick or a ring
+// preempts the spin as it would any task; a task made ready or a pending
+// vector ends it, and a user signal interrupts it as it would the wait.
 Spun spin_watched(std::uint32_t* word, std::uint64_t end, std::uint32_t taken) {
     for (unsigned n = 1;; ++n) {
         if (word_granted(__atomic_load_n(word, __ATOMIC_ACQUIRE))) return Spun::kGranted;
