@@ -10,6 +10,7 @@
 #include "port.hpp"
 #include "../kernel/gap_ticker.hpp"
 #include "ipc_fixture.hpp"
+#include "rsem_fixture.hpp"
 #include "rtpu_child.hpp"
 
 namespace chm::test {
@@ -17,27 +18,13 @@ namespace {
 
 constexpr int64_t kWait = 10'000'000'000;  // 10 s: only a broken wake-up takes this long
 
-class Rsem : public IpcTest {
+class Rsem : public RsemTest {
 protected:
     void SetUp() override {
         IpcTest::SetUp();
         create();
     }
     void attach_host() { ASSERT_EQ(chm_bp_attach_host(path_.c_str(), "test", nullptr), 0) << chm_bp_last_error(); }
-    chm_rsem_t* make(const char* name, chm_sem_kind kind = CHM_SEM_COUNTING, uint32_t initial = 0) {
-        chm_rsem_t* s = nullptr;
-        EXPECT_EQ(chm_rsem_create(name, kind, initial, CHM_SHM_COMMON, &s), 0) << chm_bp_last_error();
-        return s;
-    }
-    // Wait (bounded) until `n` tasks or threads wait on `s`.
-    bool until_waiting(chm_rsem_t* s, int n, int timeout_ms = 10000) {
-        const uint64_t end = now_ns() + uint64_t(timeout_ms) * 1000000u;
-        while (now_ns() < end) {
-            if (chm_rsem_waiting(s) == n) return true;
-            sleep_us(200);
-        }
-        return false;
-    }
 };
 
 volatile int g_result = -1000;

@@ -15,6 +15,7 @@
 #include "chimera/shm.h"
 #include "chimera/usig.h"
 #include "ipc_fixture.hpp"
+#include "rsem_fixture.hpp"
 #include "kernel/kernel.hpp"  // the kernel's switch count
 #include "port.hpp"
 #include "rtpu_child.hpp"
@@ -25,11 +26,6 @@ namespace {
 constexpr int64_t kWait = 30'000'000'000;  // 30 s: only a broken wake-up takes this long
 constexpr uint64_t kMs = 1'000'000;
 constexpr uint64_t kPollLong = 60'000'000'000;  // each RTPU polls 60 s before it sleeps
-
-chm_rsem_t* open_sem(const char* name) {
-    chm_rsem_t* s = nullptr;
-    return chm_rsem_open(name, &s) == 0 ? s : nullptr;
-}
 
 void pause_ms(uint64_t ms) { chm_task_pause_until(chm_time_now() + ms * kMs); }
 
@@ -53,7 +49,7 @@ void waiter(void* arg) {
     g_switches = chm::kernel::g_k.switches - sw;
 }
 
-class Spin : public IpcTest {
+class Spin : public RsemTest {
 protected:
     void SetUp() override {
         IpcTest::SetUp();
@@ -61,19 +57,6 @@ protected:
         ASSERT_EQ(chm_bp_attach_host(path_.c_str(), "test", nullptr), 0) << chm_bp_last_error();
         sem_ = make("sem");
         flag_ = make("flag");
-    }
-    chm_rsem_t* make(const char* name) {
-        chm_rsem_t* s = nullptr;
-        EXPECT_EQ(chm_rsem_create(name, CHM_SEM_COUNTING, 0, CHM_SHM_COMMON, &s), 0) << chm_bp_last_error();
-        return s;
-    }
-    bool until_waiting(chm_rsem_t* s, int n) {
-        const uint64_t end = now_ns() + 10000 * kMs;
-        while (now_ns() < end) {
-            if (chm_rsem_waiting(s) == n) return true;
-            sleep_us(200);
-        }
-        return false;
     }
     // RTPU 1 (FIXED policy, polling kPollLong) runs `tasks`; it exits with
     // check()'s verdict on what the waiter saw.

@@ -11,6 +11,7 @@
 #include "chimera/shm.h"
 #include "port.hpp"
 #include "ipc_fixture.hpp"
+#include "rsem_fixture.hpp"
 #include "rtpu_child.hpp"
 
 namespace chm::test {
@@ -20,32 +21,14 @@ constexpr int64_t kWait = 10'000'000'000;  // 10 s: only a broken wake-up takes 
 constexpr uint64_t kMs = 1'000'000;
 constexpr uint64_t kBusyNs = 300 * kMs;   // long beside any wake-up, even under qemu
 
-class Wake : public IpcTest {
+class Wake : public RsemTest {
 protected:
     void SetUp() override {
         IpcTest::SetUp();
         create();
         ASSERT_EQ(chm_bp_attach_host(path_.c_str(), "test", nullptr), 0) << chm_bp_last_error();
     }
-    chm_rsem_t* make(const char* name) {
-        chm_rsem_t* s = nullptr;
-        EXPECT_EQ(chm_rsem_create(name, CHM_SEM_COUNTING, 0, CHM_SHM_COMMON, &s), 0) << chm_bp_last_error();
-        return s;
-    }
-    bool until_waiting(chm_rsem_t* s, int n) {
-        const uint64_t end = now_ns() + 10000 * kMs;
-        while (now_ns() < end) {
-            if (chm_rsem_waiting(s) == n) return true;
-            sleep_us(200);
-        }
-        return false;
-    }
 };
-
-chm_rsem_t* open_sem(const char* name) {
-    chm_rsem_t* s = nullptr;
-    return chm_rsem_open(name, &s) == 0 ? s : nullptr;
-}
 
 // ---- a hand-off between two RTPUs that poll before sleeping
 
