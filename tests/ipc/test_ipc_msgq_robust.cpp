@@ -30,6 +30,18 @@ protected:
             return 3;
         });
     }
+    // The two robustness tests' start: queue "rx" (FIFO, 8 bytes, 4 deep),
+    // and a host process from slot 1 blocked in receive on it (rx_host_).
+    void start_rx_with_a_host_receiver() {
+        create();
+        ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
+        rx_ = make_queue("rx", CHM_MSGQ_FIFO, 8, 4);
+        ASSERT_NE(rx_, nullptr);
+        rx_host_ = spawn_receiver(1);
+        ASSERT_TRUE(wait_for([&] { return info(rx_).receivers_waiting == 1; }));
+    }
+    chm_msgq_t* rx_ = nullptr;
+    pid_t rx_host_ = -1;
 };
 
 // Drain q (non-blocking): the first words of the messages, in order.
@@ -49,13 +61,10 @@ void parked_receiver(void*) {
 }
 
 TEST_F(IpcMsgqRobust, KilledWaitersAreRemovedAndTheQueueKeepsWorking) {
-    create();
-    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
-    chm_msgq_t* q = make_queue("rx", CHM_MSGQ_FIFO, 8, 4);
-    ASSERT_NE(q, nullptr);
     // A host process on the futex and an RTPU task parked, both in receive.
-    const pid_t host = spawn_receiver(1);
-    ASSERT_TRUE(wait_for([&] { return info(q).receivers_waiting == 1; }));
+    ASSERT_NO_FATAL_FAILURE(start_rx_with_a_host_receiver());
+    chm_msgq_t* q = rx_;
+    const pid_t host = rx_host_;
     const pid_t rtpu = spawn([&] {
         return run_rtpu(path_, 2, [&] {
             if (chm_msgq_open("rx", &g_q)) chm_kernel_stop(20);
@@ -94,12 +103,9 @@ TEST_F(IpcMsgqRobust, KilledWaitersAreRemovedAndTheQueueKeepsWorking) {
 // left the record: 1 in ~10 runs under qemu, where a killed RTPU was
 // often the first to recover its dead peer).
 TEST_F(IpcMsgqRobust, ATakenOverRecoveryAdoptsTheLockItsDeadRecovererHeld) {
-    create();
-    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
-    chm_msgq_t* q = make_queue("rx", CHM_MSGQ_FIFO, 8, 4);
-    ASSERT_NE(q, nullptr);
-    const pid_t waiter = spawn_receiver(1);
-    ASSERT_TRUE(wait_for([&] { return info(q).receivers_waiting == 1; }));
+    ASSERT_NO_FATAL_FAILURE(start_rx_with_a_host_receiver());
+    chm_msgq_t* q = rx_;
+    const pid_t waiter = rx_host_;
     const pid_t gone = spawn([] { return 0; });  // a recoverer that has died
     ASSERT_EQ(reap(gone), 0);
     // What the dead recoverer left: slot 1 RECOVERING under its name, the
