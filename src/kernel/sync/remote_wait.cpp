@@ -66,17 +66,19 @@ bool remote_waiting_locked() { return g_remote.head != nullptr; }
 
 namespace {
 
+// Move `word` from `from` to `to`; true when it holds a grant instead.
+bool move_word(std::uint32_t* word, std::uint32_t from, std::uint32_t to) {
+    return !__atomic_compare_exchange_n(word, &from, to, false, __ATOMIC_ACQ_REL, __ATOMIC_ACQUIRE) &&
+           word_granted(from);
+}
+
 // Move every parked task's word from `from` to `to` where it still holds
 // `from`; true when one holds a grant instead. Granters exchange the word,
 // so each either finds the mark (and leaves the wake-up to the poll) or
 // comes after the unmarking and rings.
 bool move_words(std::uint32_t from, std::uint32_t to) {
     bool granted = false;
-    for (const Tcb* t = g_remote.head; t; t = t->wnext) {
-        std::uint32_t expect = from;
-        if (!__atomic_compare_exchange_n(t->rword, &expect, to, false, __ATOMIC_ACQ_REL, __ATOMIC_ACQUIRE))
-            granted |= word_granted(expect);
-    }
+    for (const Tcb* t = g_remote.head; t; t = t->wnext) granted |= move_word(t->rword, from, to);
     return granted;
 }
 
@@ -110,12 +112,6 @@ bool only_waiting_locked() {
     if (port::g_irq.pending || port::doorbell_raised()) return false;
     if ((cur->sig_pending & ~cur->sig_blocked) || cur->miss_pending) return false;
     return !sched_pick_locked(now_cached_locked());
-}
-
-// Move `word` from `from` to `to`; true when it holds a grant instead.
-bool move_word(std::uint32_t* word, std::uint32_t from, std::uint32_t to) {
-    return !__atomic_compare_exchange_n(word, &from, to, false, __ATOMIC_ACQ_REL, __ATOMIC_ACQUIRE) &&
-           word_granted(from);
 }
 
 // How long the caller may spin before it parks (0: not at all): the idle
