@@ -130,23 +130,23 @@ void msgq_wake(Session& s) {
             if (chm_msgq_send(u, 2, 0, buf, kMsg) != 0) return 5;
         }
     });
-    s.time_ops("msgq_wake_rt2",
-               "same core (" + s.cpu_name(0) +
-                   "), two processes (RTPUs 1 and 2, no kernel), each sleeping in receive on its waiter "
-                   "record's futex; RT/2",
-               [&](std::uint64_t n) {
-                   char buf[kMsg];
-                   std::memset(buf, 7, sizeof buf);
-                   for (std::uint64_t i = 0; i < n; ++i) {
-                       if (chm_msgq_send(down, 1, 0, buf, kMsg) != 0) Backplane::fail("send");
-                       while (chm_msgq_receive(up, buf, sizeof buf, nullptr) != int(kMsg)) {
-                           if (const char* why = abort_reason()) Backplane::fail(why);
-                       }
-                   }
-               },
-               2);
+    const std::string config = "same core (" + s.cpu_name(0) +
+                               "), two processes (RTPUs 1 and 2, no kernel), each sleeping in receive on "
+                               "its waiter record's futex; RT/2";
+    const auto round_trips = [&](std::uint64_t n) {
+        char buf[kMsg];
+        std::memset(buf, 7, sizeof buf);
+        for (std::uint64_t i = 0; i < n; ++i) {
+            if (chm_msgq_send(down, 1, 0, buf, kMsg) != 0) Backplane::fail("send");
+            while (chm_msgq_receive(up, buf, sizeof buf, nullptr) != int(kMsg)) {
+                if (const char* why = abort_reason()) Backplane::fail(why);
+            }
+        }
+    };
+    const Stats st = s.time_ops("msgq_wake_rt2", config, round_trips, 2);
+    s.emit("msgq_wake_rt2_vs_floor", "msgq_wake_rt2's runs: " + config, st.median, st.min, st.max);
 }
-CHM_BENCH_MEASUREMENT(msgq_wake, "msgq_wake_rt2");
+CHM_BENCH_MEASUREMENT(msgq_wake, "msgq_wake_rt2", "msgq_wake_rt2_vs_floor");
 
 }  // namespace
 }  // namespace chm::bench
