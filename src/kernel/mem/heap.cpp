@@ -13,6 +13,7 @@
 #include <cerrno>
 #include <cstdint>
 #include <cstdlib>
+#include <cstring>
 
 #include <linux/futex.h>
 #include <pthread.h>
@@ -276,6 +277,17 @@ CHM_MEM_TEXT void* heap_allocate(std::size_t size) {
     void* p = g_heap.tlsf.allocate(size);
     if (!p && grow_for(size, Tlsf::kAlign))
         p = g_heap.tlsf.allocate(size);
+    return p;
+}
+
+CHM_MEM_TEXT void* heap_allocate_zeroed(std::size_t n, std::size_t size) {
+    std::size_t bytes = 0;
+    if (__builtin_mul_overflow(n, size, &bytes))
+        return nullptr;
+    void* p = heap_allocate(bytes);
+    // Freed blocks are reused as they are, so zero every time.
+    if (p)
+        std::memset(p, 0, bytes);
     return p;
 }
 

@@ -49,6 +49,8 @@ struct HeapStats {
 // (mem_api.cpp) and the malloc family (malloc_interpose.cpp) do that.
 void* heap_allocate(std::size_t size);
 void* heap_allocate_aligned(std::size_t align, std::size_t size);  // align: power of two
+// n * size bytes, zeroed (calloc); nullptr when the product overflows too.
+void* heap_allocate_zeroed(std::size_t n, std::size_t size);
 // nullptr p allocates; size 0 frees and returns nullptr; a pointer that is
 // not an allocated block of this heap returns nullptr, changes nothing and
 // sets *bad_pointer (when given) to true.

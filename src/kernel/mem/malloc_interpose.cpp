@@ -20,7 +20,6 @@
 
 #include <cerrno>
 #include <cstdlib>
-#include <cstring>
 
 #include <malloc.h>
 #include <unistd.h>
@@ -52,18 +51,7 @@ CHM_MEM_TEXT void* malloc(size_t size) noexcept { return or_enomem(heap_allocate
 CHM_MEM_TEXT void free(void* p) noexcept { chm::mem::heap_free(p); }
 
 CHM_MEM_TEXT void* calloc(size_t n, size_t size) noexcept {
-    size_t bytes = 0;
-    if (__builtin_mul_overflow(n, size, &bytes)) {
-        errno = ENOMEM;
-        return nullptr;
-    }
-    void* p = heap_allocate(bytes);
-    if (!p) {
-        errno = ENOMEM;
-        return nullptr;
-    }
-    std::memset(p, 0, bytes);
-    return p;
+    return or_enomem(chm::mem::heap_allocate_zeroed(n, size));
 }
 
 CHM_MEM_TEXT void* realloc(void* p, size_t size) noexcept {

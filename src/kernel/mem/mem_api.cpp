@@ -8,7 +8,6 @@
 #include "chimera/mem.h"
 
 #include <cerrno>
-#include <cstring>
 
 #include "kernel/mem/heap.hpp"
 #include "kernel/mem/mem_text.hpp"
@@ -25,18 +24,9 @@ CHM_MEM_TEXT void* chm_malloc(size_t size) {
 }
 
 CHM_MEM_TEXT void* chm_calloc(size_t n, size_t size) {
-    size_t bytes = 0;
-    if (__builtin_mul_overflow(n, size, &bytes)) {
+    void* p = heap_allocate_zeroed(n, size);
+    if (!p)
         errno = ENOMEM;
-        return nullptr;
-    }
-    void* p = heap_allocate(bytes);
-    if (!p) {
-        errno = ENOMEM;
-        return nullptr;
-    }
-    // Freed blocks are reused as they are, so zero every time.
-    std::memset(p, 0, bytes);
     return p;
 }
 
