@@ -193,46 +193,45 @@ def experiment_markdown(exps):
         out.append("")
     sc = exps.get("scaling_tasks")
     if sc:
-        ns = sc["tasks"]
-        out.extend(["## Cost against the number of tasks", "",
-                    "Median ns per operation with N ready tasks that never run (see "
-                    "`bench/kernel/scaling.cpp`).", "",
-                    "| operation | " + " | ".join(f"N = {n}" for n in ns) + " |",
-                    "| --- |" + " ---: |" * len(ns)])
-        for op, d in sc["ops"].items():
-            out.append(f"| `{op}` | " + " | ".join(human(v, "ns") for v in d["median"]) + " |")
-        out.append("")
+        out.extend(median_table(
+            "Cost against the number of tasks",
+            "Median ns per operation with N ready tasks that never run (see "
+            "`bench/kernel/scaling.cpp`).",
+            "operation", [f"N = {n}" for n in sc["tasks"]], sc["ops"]))
     sr = exps.get("scaling_rtpus")
     if sr:
-        ns = [int(n) for n in sr["rtpus"]]
-        out.extend(["## Cost against the number of RTPUs", "",
-                    "Median ns per operation with N RTPUs running (see `bench/ipc/scaling_rtpus.cpp`): "
-                    "`rsem_handoff_rt2` is a remote semaphore hand-off (RT/2) between a task on RTPU 1 "
-                    "and one on RTPU 2 on the other core while RTPUs 3..N run idle (N = 1: both tasks "
-                    "on RTPU 1); `msgq_fan_in` is the time per message one receiver on RTPU 1 takes "
-                    "from N-1 sender RTPUs blocked on a full queue (N = 1: a sender task on RTPU 1). "
-                    "On a 2-core machine more than two busy RTPUs share the cores. "
-                    f"{sr.get('config', '')}.", "",
-                    "| operation | " + " | ".join(f"N = {n}" for n in ns) + " |",
-                    "| --- |" + " ---: |" * len(ns)])
-        for op, d in sr["ops"].items():
-            out.append(f"| `{op}` | " + " | ".join(human(v, "ns") for v in d["median"]) + " |")
-        out.append("")
+        out.extend(median_table(
+            "Cost against the number of RTPUs",
+            "Median ns per operation with N RTPUs running (see `bench/ipc/scaling_rtpus.cpp`): "
+            "`rsem_handoff_rt2` is a remote semaphore hand-off (RT/2) between a task on RTPU 1 "
+            "and one on RTPU 2 on the other core while RTPUs 3..N run idle (N = 1: both tasks "
+            "on RTPU 1); `msgq_fan_in` is the time per message one receiver on RTPU 1 takes "
+            "from N-1 sender RTPUs blocked on a full queue (N = 1: a sender task on RTPU 1). "
+            "On a 2-core machine more than two busy RTPUs share the cores. "
+            f"{sr.get('config', '')}.",
+            "operation", [f"N = {int(n)}" for n in sr["rtpus"]], sr["ops"]))
     sm = exps.get("scaling_msg_size")
     if sm:
-        sizes = [int(b) for b in sm["bytes"]]
-        out.extend(["## Cost against the message size", "",
-                    "Median ns per put+get with nobody waiting, by message size (see "
-                    "`bench/ipc/scaling_msg_size.cpp`): Chimera's queue in another RTPU's window, "
-                    "Boost.Interprocess `message_queue` and POSIX mq in one thread, and two `memcpy` "
-                    "of the size for scale (the copy in and out every queue makes). "
-                    f"{sm.get('config', '')}"
-                    + (f"; {sm['posix_mq_note']}" if sm.get("posix_mq_note") else "") + ".", "",
-                    "| queue | " + " | ".join(size_label(b) for b in sizes) + " |",
-                    "| --- |" + " ---: |" * len(sizes)])
-        for name, d in sm["series"].items():
-            out.append(f"| `{name}` | " + " | ".join(human(v, "ns") for v in d["median"]) + " |")
-        out.append("")
+        out.extend(median_table(
+            "Cost against the message size",
+            "Median ns per put+get with nobody waiting, by message size (see "
+            "`bench/ipc/scaling_msg_size.cpp`): Chimera's queue in another RTPU's window, "
+            "Boost.Interprocess `message_queue` and POSIX mq in one thread, and two `memcpy` "
+            "of the size for scale (the copy in and out every queue makes). "
+            f"{sm.get('config', '')}"
+            + (f"; {sm['posix_mq_note']}" if sm.get("posix_mq_note") else "") + ".",
+            "queue", [size_label(int(b)) for b in sm["bytes"]], sm["series"]))
+    return out
+
+
+def median_table(title, prose, first, columns, series):
+    """A section with one row of medians (ns) per series, one column per point."""
+    out = [f"## {title}", "", prose, "",
+           f"| {first} | " + " | ".join(columns) + " |",
+           "| --- |" + " ---: |" * len(columns)]
+    for name, d in series.items():
+        out.append(f"| `{name}` | " + " | ".join(human(v, "ns") for v in d["median"]) + " |")
+    out.append("")
     return out
 
 
