@@ -350,8 +350,10 @@ TEST_F(IpcMsgqRobust, BpcheckLooksInsideQueuesAndSemaphores) {
 
     auto* qh = reinterpret_cast<QueueHeader*>(q);
     qh->count.store(7);
-    // The semaphore's count: after its lock and two words (magic, kind).
-    auto* count = reinterpret_cast<bp::A32*>(reinterpret_cast<char*>(s) + sizeof(bp::Lock) + 8);
+    // The semaphore's count: after its lock and two words (magic, kind),
+    // from the first 64-byte boundary of the allocation the handle names.
+    const auto body = (reinterpret_cast<std::uintptr_t>(s) + 63) & ~std::uintptr_t(63);
+    auto* count = reinterpret_cast<bp::A32*>(body + sizeof(bp::Lock) + 8);
     ASSERT_EQ(count->load(), 1u);
     count->store(3);
     EXPECT_NE(bpcheck(path_, &out), 0) << out;

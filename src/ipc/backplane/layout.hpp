@@ -31,7 +31,7 @@ static_assert(sizeof(A32) == 4);
 
 inline constexpr std::uint32_t kMagic = 0x43484D42;         // "CHMB"
 inline constexpr std::uint32_t kMagicSwapped = 0x424D4843;  // other byte order
-inline constexpr std::uint32_t kLayoutVersion = 2;
+inline constexpr std::uint32_t kLayoutVersion = 3;  // 3: remote semaphores 64-aligned, grant words apart
 inline constexpr std::uint32_t kPage = 4096;
 inline constexpr std::uint32_t kMaxSlots = 32;   // attach masks are uint32_t
 inline constexpr std::uint32_t kMinSlots = 2;

@@ -5,6 +5,7 @@
 // slot's records and passes on a grant it never took.
 #include <cerrno>
 #include <climits>
+#include <cstddef>
 #include <cstdint>
 #include <cstdio>
 
@@ -25,10 +26,11 @@ namespace {
 constexpr std::uint32_t kRsemMagic = 0x5253454d;  // "RSEM"
 enum WaiterState : std::uint32_t { kFree = 0, kWaiting = 1, kGranted = 2 };
 
+// Six words, so that the lock, the counters and record 0 fill one cache
+// line: a V that takes the lock has the usual single waiter's record too.
 struct Waiter {
     A32 state;
-    A32 grant;    // the word its owner waits on
-    A32 slot, gen;
+    A32 owner;    // make_token(slot, generation) of the waiting process
     A32 prio;     // task priority (higher first); host threads 0
     A32 seq;      // arrival, FIFO among equals
     A32 task;     // the parked task's id (WaiterId); 0: the futex
@@ -43,16 +45,33 @@ struct Rsem {
     A32 nwaiting;
     A32 seq;
     A32 broken;
-    Waiter w[CHM_RSEM_WAITERS];
+    Waiter w[CHM_RSEM_WAITERS];  // taken lowest index first
+    // The word record i's owner waits on, alone in its cache line: a
+    // granter's exchange then moves one line the waiter spins on, and
+    // reading the records does not take it from the spinner first.
+    struct GrantLine {
+        A32 word;
+        std::uint32_t pad[15];
+    } grant[CHM_RSEM_WAITERS];
 };
 static_assert(std::is_standard_layout_v<Rsem>);
+static_assert(offsetof(Rsem, w) + sizeof(Waiter) == 64, "lock, counters and record 0: one line");
+
+// The backplane's allocator aligns to 16 bytes; a semaphore takes 48 more
+// and starts at the first 64-byte boundary inside, the same in every
+// process (mappings are page-aligned).
+constexpr std::uint32_t kAllocSize = sizeof(Rsem) + 48;
+Rsem* rsem_at(void* allocation) {
+    const auto p = reinterpret_cast<std::uintptr_t>(allocation);
+    return reinterpret_cast<Rsem*>((p + 63) & ~std::uintptr_t(63));
+}
 
 Rsem* from_handle(chm_rsem_t* h) {
     Attachment* a = current();
     if (!a || !h) return nullptr;
-    auto* s = reinterpret_cast<Rsem*>(h);
-    const char* p = reinterpret_cast<const char*>(s);
-    if (p < a->base || p + sizeof(Rsem) > a->base + a->size) return nullptr;
+    const char* p = reinterpret_cast<const char*>(h);
+    if (p < a->base || p + kAllocSize > a->base + a->size) return nullptr;
+    Rsem* s = rsem_at(h);
     return s->magic.load(std::memory_order_relaxed) == kRsemMagic ? s : nullptr;
 }
 
@@ -88,14 +107,19 @@ int lock(Rsem* s) {
 
 void unlock(Rsem* s) { lock_release(&s->lock); }
 
+std::uint32_t* grant_of(Rsem* s, const Waiter* w) {
+    return reinterpret_cast<std::uint32_t*>(&s->grant[w - s->w].word);
+}
+
+std::uint32_t owner_slot(const Waiter* w) { return token_slot(w->owner.load()); }
+
 WaiterId recorded(const Waiter* w) { return WaiterId{w->task.load(), w->urgency.load()}; }
 
 // The most urgent waiting record, or nullptr. Lock held.
 Waiter* most_urgent_locked(Rsem* s) {
     Waiter* best = nullptr;
     std::uint32_t left = s->nwaiting.load();  // stop after the last waiting record
-    for (int i = CHM_RSEM_WAITERS - 1; i >= 0; --i) {
-        Waiter& w = s->w[i];
+    for (Waiter& w : s->w) {
         if (!left) break;
         if (w.state.load() != kWaiting) continue;
         --left;
@@ -118,7 +142,7 @@ int give_locked(Rsem* s, Waiter** woken) {
         // Before the grant (whose exchange releases it): the waiter frees
         // its record after seeing the grant, without the lock.
         w->state.store(kGranted, R);
-        const bool watched = store_grant(reinterpret_cast<std::uint32_t*>(&w->grant), 1);
+        const bool watched = store_grant(grant_of(s, w), 1);
         lock_clear_dirty(&s->lock);
         if (!watched) *woken = w;
         return 0;
@@ -140,13 +164,13 @@ int give_locked(Rsem* s, Waiter** woken) {
 // recovers remote semaphores whether or not it uses them.
 void rsem_recover(const View& v, std::uint32_t index, std::uint32_t dead_slot, std::uint32_t dead_gen,
              std::uint32_t rt) {
-    auto* s = v.at<Rsem>(v.entry(index)->offset.load());
+    Rsem* s = rsem_at(v.at<char>(v.entry(index)->offset.load()));
     if (s->magic.load() != kRsemMagic) return;
     if (lock_acquire_recovery(v, &s->lock, rt) == -ETIMEDOUT) return;
     if (s->lock.dirty.load()) repair_locked(s);
     std::uint32_t passed = 0;
     for (Waiter& w : s->w) {
-        if (w.slot.load() != dead_slot || w.gen.load() != (dead_gen & 0xFFFFFF)) continue;
+        if (w.owner.load() != make_token(dead_slot, dead_gen)) continue;
         const std::uint32_t st = w.state.load();
         if (st == kWaiting) s->nwaiting.fetch_sub(1);
         if (st == kGranted) ++passed;
@@ -162,14 +186,14 @@ void rsem_recover(const View& v, std::uint32_t index, std::uint32_t dead_slot, s
     }
     lock_release(&s->lock);
     for (std::uint32_t i = 0; i < n; ++i)
-        wake_granted(reinterpret_cast<std::uint32_t*>(&to_wake[i]->grant), to_wake[i]->slot.load(),
+        wake_granted(grant_of(s, to_wake[i]), owner_slot(to_wake[i]),
                      recorded(to_wake[i]));
 }
 
 void rsem_check(const View& v, std::uint32_t off, std::uint32_t size, const char* name, Report& r) {
     constexpr auto R = std::memory_order_relaxed;
-    if (size < sizeof(Rsem)) return r.problem("%s: %u bytes, smaller than a remote semaphore", name, size);
-    const auto* s = v.at<Rsem>(off);
+    if (size < kAllocSize) return r.problem("%s: %u bytes, smaller than a remote semaphore", name, size);
+    const Rsem* s = rsem_at(v.at<char>(off));
     if (s->magic.load(R) != kRsemMagic) return r.problem("%s: no remote-semaphore magic", name);
     const std::uint32_t kind = s->kind.load(R);
     if (kind != CHM_SEM_BINARY && kind != CHM_SEM_COUNTING) return r.problem("%s: kind %u is not a semaphore kind", name, kind);
@@ -191,10 +215,10 @@ void rsem_check(const View& v, std::uint32_t off, std::uint32_t size, const char
             continue;
         }
         waiting += st == kWaiting;
-        const std::uint32_t slot = w.slot.load(R);
-        if (slot >= v.slots() || !token_alive(v, make_token(slot, w.gen.load(R)), true))
+        const std::uint32_t owner = w.owner.load(R), slot = token_slot(owner);
+        if (slot >= v.slots() || !token_alive(v, owner, true))
             r.problem("%s: waiter %u (%s) belongs to slot %u generation %u, not a live process", name, i,
-                      st == kWaiting ? "waiting" : "granted", slot, w.gen.load(R));
+                      st == kWaiting ? "waiting" : "granted", slot, owner & kGenMask);
     }
     if (s->nwaiting.load(R) != waiting) r.problem("%s: nwaiting %u, %u records waiting", name, s->nwaiting.load(R), waiting);
     if (count > 0 && waiting > 0) r.problem("%s: count %u while %u waiters wait", name, count, waiting);
@@ -222,12 +246,12 @@ int chm_rsem_create(const char* name, enum chm_sem_kind kind, uint32_t initial, 
     int r = registry_lock(*a, a->token);
     if (r) return set_error("chm_rsem_create %s: registry lock", name), r;
     EntryInfo info{};
-    r = registry_create_locked(*a, a->token, kKindRemoteSem, name, sizeof(Rsem),
+    r = registry_create_locked(*a, a->token, kKindRemoteSem, name, kAllocSize,
                                where == CHM_SHM_COMMON ? kWhereCommon : std::uint32_t(where),
                                a->slot, &info);
     if (r == 0) {
         // Not findable by name until the registry lock is released.
-        auto* s = a->at<Rsem>(info.offset);
+        Rsem* s = rsem_at(a->at<char>(info.offset));
         s->kind.store(kind);
         s->count.store(initial);
         s->nwaiting.store(0);
@@ -237,7 +261,7 @@ int chm_rsem_create(const char* name, enum chm_sem_kind kind, uint32_t initial, 
         s->lock.token.store(0);
         s->magic.store(kRsemMagic, std::memory_order_release);
         a->local_refs[info.index] = 1;
-        *out = reinterpret_cast<chm_rsem_t*>(s);
+        *out = reinterpret_cast<chm_rsem_t*>(a->at<char>(info.offset));
     }
     registry_unlock(*a);
     switch (r) {
@@ -282,8 +306,7 @@ int chm_rsem_p_timed(chm_rsem_t* h, int64_t timeout_ns) {
         return -EAGAIN;
     }
     Waiter* me = nullptr;
-    for (int i = CHM_RSEM_WAITERS - 1; i >= 0; --i) {
-        Waiter& w = s->w[i];
+    for (Waiter& w : s->w) {
         if (w.state.load() == kFree) {
             me = &w;
             break;
@@ -306,9 +329,9 @@ int chm_rsem_p_timed(chm_rsem_t* h, int64_t timeout_ns) {
     const std::uint32_t seq = s->seq.load(R) + 1;
     s->seq.store(seq, R);
     s->nwaiting.store(s->nwaiting.load(R) + 1, R);
-    me->grant.store(initial, R);
-    me->slot.store(a->slot, R);
-    me->gen.store(a->gen & 0xFFFFFF, R);
+    std::uint32_t* const grant = grant_of(s, me);
+    __atomic_store_n(grant, initial, __ATOMIC_RELAXED);
+    me->owner.store(a->token, R);
     me->prio.store(prio, R);
     me->seq.store(seq, R);
     me->task.store(who.task, R);
@@ -317,17 +340,17 @@ int chm_rsem_p_timed(chm_rsem_t* h, int64_t timeout_ns) {
     lock_clear_dirty(&s->lock);
     unlock(s);
 
-    int r = wait_word(reinterpret_cast<std::uint32_t*>(&me->grant), timeout_ns);
+    int r = wait_word(grant, timeout_ns);
 
     // Granted: the granter already took the record off the waiting list
     // (kGranted, nwaiting), so giving it back needs no lock: a hand-off
     // costs one lock round trip per side instead of two.
-    if (chm::kernel::word_granted(me->grant.load(std::memory_order_acquire))) {
+    if (chm::kernel::word_granted(__atomic_load_n(grant, __ATOMIC_ACQUIRE))) {
         me->state.store(kFree, std::memory_order_release);
         return 0;
     }
     if (int e = lock(s)) return e;
-    if (chm::kernel::word_granted(me->grant.load())) {
+    if (chm::kernel::word_granted(__atomic_load_n(grant, __ATOMIC_SEQ_CST))) {
         r = 0;  // granted, perhaps just as the wait timed out
     } else if (me->state.load() == kWaiting) {
         s->nwaiting.fetch_sub(1);
@@ -349,11 +372,11 @@ int chm_rsem_v(chm_rsem_t* h) {
     std::uint32_t slot = 0;
     WaiterId who;
     if (w) {
-        slot = w->slot.load();
+        slot = owner_slot(w);
         who = recorded(w);
     }
     unlock(s);
-    if (w) wake_granted(reinterpret_cast<std::uint32_t*>(&w->grant), slot, who);
+    if (w) wake_granted(grant_of(s, w), slot, who);
     if (r) set_error("chm_rsem_v: the count would overflow");
     return r;
 }
@@ -378,7 +401,7 @@ int chm_rsem_close(chm_rsem_t* h) {
     if (r) return r;
     // A handle this process did not open (or closed already) is no error
     // here: the semaphore lives on either way.
-    registry_unref_locked(*a, a->off_of(s), kKindRemoteSem);
+    registry_unref_locked(*a, a->off_of(h), kKindRemoteSem);
     registry_unlock(*a);
     return 0;
 }
