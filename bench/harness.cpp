@@ -152,7 +152,24 @@ Stats Session::time_custom(const std::string& row, const std::string& config,
     return st;
 }
 
-Stats Session::measure(const std::function<double(std::uint64_t)>& body, double ops_per_iter) {
+namespace {
+
+// Median, min and max of per-operation times (sorted in place).
+Stats stats_of(std::vector<double>& per_op, std::uint64_t n) {
+    std::sort(per_op.begin(), per_op.end());
+    Stats st;
+    st.runs = int(per_op.size());
+    st.iters_per_run = n;
+    st.min = per_op.front();
+    st.max = per_op.back();
+    const std::size_t mid = per_op.size() / 2;
+    st.median = per_op.size() % 2 ? per_op[mid] : (per_op[mid - 1] + per_op[mid]) / 2;
+    return st;
+}
+
+}  // namespace
+
+std::uint64_t Session::calibrate(const std::function<double(std::uint64_t)>& body) const {
     constexpr std::uint64_t kMaxIters = std::uint64_t(1) << 32;
     const double goal = opt_.run_ns;
 
@@ -181,6 +198,11 @@ Stats Session::measure(const std::function<double(std::uint64_t)>& body, double 
         if (t >= goal / 2 || n >= kMaxIters) break;
         n = scaled(n, t);
     }
+    return n;
+}
+
+Stats Session::measure(const std::function<double(std::uint64_t)>& body, double ops_per_iter) {
+    const std::uint64_t n = calibrate(body);
     for (int i = 0; i < opt_.warmup_runs; ++i) body(n);
 
     std::vector<double> per_op;
@@ -189,15 +211,27 @@ Stats Session::measure(const std::function<double(std::uint64_t)>& body, double 
         per_op.push_back(body(n) / (double(n) * ops_per_iter));
         if (abort_reason()) throw std::runtime_error(abort_reason());
     }
-    std::sort(per_op.begin(), per_op.end());
-    Stats st;
-    st.runs = opt_.runs;
-    st.iters_per_run = n;
-    st.min = per_op.front();
-    st.max = per_op.back();
-    const std::size_t mid = per_op.size() / 2;
-    st.median = per_op.size() % 2 ? per_op[mid] : (per_op[mid - 1] + per_op[mid]) / 2;
-    return st;
+    return stats_of(per_op, n);
+}
+
+std::pair<Stats, Stats> Session::measure_interleaved(const std::function<double(std::uint64_t)>& a,
+                                                     const std::function<double(std::uint64_t)>& b,
+                                                     double ops_per_iter) {
+    const std::uint64_t n = calibrate(a);
+    b(1);  // b's cold call
+    for (int i = 0; i < opt_.warmup_runs; ++i) {
+        a(n);
+        b(n);
+    }
+    std::vector<double> per_op_a, per_op_b;
+    per_op_a.reserve(std::size_t(opt_.runs));
+    per_op_b.reserve(std::size_t(opt_.runs));
+    for (int i = 0; i < opt_.runs; ++i) {
+        per_op_a.push_back(a(n) / (double(n) * ops_per_iter));
+        per_op_b.push_back(b(n) / (double(n) * ops_per_iter));
+        if (abort_reason()) throw std::runtime_error(abort_reason());
+    }
+    return {stats_of(per_op_a, n), stats_of(per_op_b, n)};
 }
 
 void Session::emit(const std::string& row, const std::string& config, double value, double min,

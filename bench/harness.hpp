@@ -32,6 +32,7 @@
 #include <limits>
 #include <stdexcept>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace chm::bench {
@@ -106,6 +107,14 @@ public:
     // feed another (a ratio, a scaling curve).
     Stats measure(const std::function<double(std::uint64_t n)>& body, double ops_per_iter = 1);
 
+    // Two bodies measured by the method of measure, run by run in turn (a,
+    // then b, the same n, calibrated on a): a figure and the floor it is
+    // judged against, so both see the same conditions (a host that moves
+    // its vCPUs during a run moves both). Emits nothing.
+    std::pair<Stats, Stats> measure_interleaved(const std::function<double(std::uint64_t n)>& a,
+                                                const std::function<double(std::uint64_t n)>& b,
+                                                double ops_per_iter = 1);
+
     // A figure computed some other way (percentiles, a tool's own report).
     void emit(const std::string& row, const std::string& config, double value,
               double min = kNull, double max = kNull);
@@ -123,6 +132,9 @@ public:
     void write_data(const std::string& name, const std::string& json) const;
 
 private:
+    // The iteration count that makes one run of `body` last about run_ns.
+    std::uint64_t calibrate(const std::function<double(std::uint64_t n)>& body) const;
+
     const Options& opt_;
     std::vector<Measured>* out_;
 };

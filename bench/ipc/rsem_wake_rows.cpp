@@ -16,9 +16,16 @@
 //  * rsem_handoff_polling: the same ping-pong with idle_poll_ns on both
 //    RTPUs: a waiting task with nothing else to run spins on its grant
 //    word before it parks, so a V costs no ring, switch or system call on
-//    either side; beside the cache-line ping-pong floor.
+//    either side; beside its floor, peer_cacheline_pingpong_rtpus: the
+//    same two tasks passing one cache line, measured run by run in turn
+//    with it (the host moves its vCPUs between placements whose line
+//    transfer differs sevenfold, sometimes within a run: a floor measured
+//    at another moment would be judged by the wrong one).
+#include <atomic>
 #include <cstdint>
 #include <cstdio>
+#include <new>
+#include <stdexcept>
 #include <string>
 
 #include "../harness.hpp"
@@ -26,7 +33,7 @@
 #include "chimera/bp.h"
 #include "chimera/rsem.h"
 #include "chimera/shm.h"
-#include "port.hpp"  // the doorbell's ring counters
+#include "port.hpp"  // the doorbell's ring counters, relax()
 #include "rtpu.hpp"
 
 namespace chm::bench {
@@ -169,7 +176,63 @@ CHM_BENCH_MEASUREMENT(rsem_wake_local_row, "remote_semv_wake_local");
 // ---- two RTPUs on two cores: a task on each hands two semaphores back
 // and forth. RT/2 = a V on one RTPU until the task it wakes on the other
 // runs.
-void rsem_xrtpu(Session& s, const std::string& row, std::uint64_t poll_ns, const std::string& mode) {
+
+// The cache-line floor between the same two tasks, in common memory: the
+// line that moves, and (on a line of its own) what the partner does when
+// a V wakes it.
+struct alignas(64) FloorLine {
+    std::atomic<std::uint64_t> seq{0};
+};
+struct Floor {
+    FloorLine line;
+    alignas(64) std::atomic<std::uint32_t> pass_line{0};  // 1: answer the line until kStop
+};
+constexpr std::uint64_t kStop = UINT64_MAX;
+
+Floor* floor_in(void* segment) {
+    const auto p = reinterpret_cast<std::uintptr_t>(segment);
+    return reinterpret_cast<Floor*>((p + 63) & ~std::uintptr_t(63));
+}
+
+// The partner's side: answer every odd value with the next even one.
+void answer_line(FloorLine& l) {
+    for (std::uint64_t want = 1;;) {
+        const std::uint64_t v = l.seq.load(std::memory_order_acquire);
+        if (v == want) {
+            l.seq.store(want + 1, std::memory_order_release);
+            want += 2;
+        } else if (v == kStop) {
+            return;
+        } else {
+            chm::port::relax();
+        }
+    }
+}
+
+// `n` hand-offs of the line and back (the bench's side); the partner's
+// task is woken into answer_line and back out by the two semaphores.
+double pass_line(Floor& fl, chm_rsem_t* ping, chm_rsem_t* pong, std::uint64_t n) {
+    fl.line.seq.store(0, std::memory_order_relaxed);
+    fl.pass_line.store(1, std::memory_order_relaxed);
+    check_rsem(chm_rsem_v(ping), "chm_rsem_v");  // publishes both stores
+    const std::uint64_t t0 = mono_ns();
+    for (std::uint64_t v = 0; v < 2 * n; v += 2) {
+        fl.line.seq.store(v + 1, std::memory_order_release);
+        for (std::uint32_t spins = 0; fl.line.seq.load(std::memory_order_acquire) != v + 2;) {
+            chm::port::relax();
+            if (++spins == 0 && abort_reason()) throw std::runtime_error(abort_reason());
+        }
+    }
+    const double ns = double(mono_ns() - t0);
+    fl.line.seq.store(kStop, std::memory_order_release);
+    check_rsem(chm_rsem_p(pong), "chm_rsem_p");
+    fl.pass_line.store(0, std::memory_order_relaxed);
+    return ns;
+}
+
+// `floor_row` non-null: the row's floor measured with it, run by run in turn.
+void rsem_xrtpu(Session& s, const std::string& row, std::uint64_t poll_ns, const std::string& mode,
+                const char* floor_row = nullptr) {
     s.need_cpus(2);
     Session::pin(s.cpu(0));
     const kb::TickClock& clk = kb::tick_clock();
@@ -177,14 +240,23 @@ void rsem_xrtpu(Session& s, const std::string& row, std::uint64_t poll_ns, const
     ipcb::Joined me(f.path, 1);
     chm_rsem_t* ping = make_sem("ping");
     chm_rsem_t* pong = make_sem("pong");
+    void* segment = nullptr;
+    if (const int r = chm_shm_create("floor", sizeof(Floor) + 64, CHM_SHM_COMMON, &segment))
+        ipcb::fail_bp("chm_shm_create floor", r);
+    Floor& fl = *new (floor_in(segment)) Floor;
     auto child = ipcb::rtpu_child(s.cpu(1), f.path, 2, poll_ns, ipcb::child_limit(s), [](ipcb::Kernel& k) {
         static std::function<void()> body;
         body = [] {
             chm_rsem_t *pi = nullptr, *po = nullptr;
+            void* seg = nullptr;
+            std::size_t size = 0;
             check_rsem(chm_rsem_open("ping", &pi), "chm_rsem_open ping");
             check_rsem(chm_rsem_open("pong", &po), "chm_rsem_open pong");
+            check_rsem(chm_shm_attach("floor", &seg, &size), "chm_shm_attach floor");
+            Floor& fl = *floor_in(seg);
             for (;;) {
                 check_rsem(chm_rsem_p(pi), "chm_rsem_p");
+                if (fl.pass_line.load(std::memory_order_relaxed)) answer_line(fl.line);
                 check_rsem(chm_rsem_v(po), "chm_rsem_v");
             }
         };
@@ -224,14 +296,30 @@ void rsem_xrtpu(Session& s, const std::string& row, std::uint64_t poll_ns, const
             const std::string rang = "; per V on this side: " +
                                      per_v(chm::port::doorbell_rings_sent() - rings0) + " rings, " +
                                      per_v(chm::port::doorbell_signals_sent() - signals0) + " signals";
-            s.time_ops(row, cfg + "; the V call alone on the caller's side: " + kb::fmt_ns(v_call.median) + rang,
-                       [&](std::uint64_t n) {
-                           for (std::uint64_t i = 0; i < n; ++i) {
-                               check_rsem(chm_rsem_v(ping), "chm_rsem_v");
-                               check_rsem(chm_rsem_p(pong), "chm_rsem_p");
-                           }
-                       },
-                       2);
+            const auto handoffs = [&](std::uint64_t n) {
+                const std::uint64_t t0 = mono_ns();
+                for (std::uint64_t i = 0; i < n; ++i) {
+                    check_rsem(chm_rsem_v(ping), "chm_rsem_v");
+                    check_rsem(chm_rsem_p(pong), "chm_rsem_p");
+                }
+                return double(mono_ns() - t0);
+            };
+            const std::string what = cfg + "; the V call alone on the caller's side: " + kb::fmt_ns(v_call.median) + rang;
+            if (!floor_row) {
+                s.time_custom(row, what, handoffs, 2);
+                return;
+            }
+            const auto [sem, line] = s.measure_interleaved(
+                handoffs, [&](std::uint64_t n) { return pass_line(fl, ping, pong, n); }, 2);
+            const std::string how = "; median of " + std::to_string(sem.runs) + " runs x " +
+                                    std::to_string(sem.iters_per_run) + " iterations, each run followed by one of " +
+                                    floor_row;
+            s.emit(row, what + how, sem.median, sem.min, sem.max);
+            s.emit(floor_row,
+                   "the two tasks of " + row + " (RTPU 1 pinned " + s.cpu_name(0) + ", RTPU 2 pinned " +
+                       s.cpu_name(1) + ") pass one cache line in common memory, spinning; RT/2; "
+                       "each run follows one of " + row,
+                   line.median, line.min, line.max);
         };
         k.spawn(&body, 10, "bench");
         k.run();
@@ -250,9 +338,10 @@ void rsem_polling_row(Session& s) {
                "idle_poll_ns " + std::to_string(kPollNs / 1000) +
                    " us on both (a task whose P must wait, with nothing else to run on its RTPU, "
                    "spins on its grant word that long before it parks: a V stores the grant and "
-                   "rings nothing, no switch or system call on either side)");
+                   "rings nothing, no switch or system call on either side)",
+               "peer_cacheline_pingpong_rtpus");
 }
-CHM_BENCH_MEASUREMENT(rsem_polling_row, "rsem_handoff_polling");
+CHM_BENCH_MEASUREMENT(rsem_polling_row, "rsem_handoff_polling", "peer_cacheline_pingpong_rtpus");
 
 }  // namespace
 }  // namespace chm::bench
