@@ -229,17 +229,118 @@ TEST_F(WakeUrgency, ASwitchToALessUrgentTaskTakesTheGrantLeftWithoutASignal) {
     EXPECT_EQ(o.child, 0) << "60: the grant waited until \"middle\" was done";
 }
 
-// MUF (the default): the order is deadlines and laxity, no number another
-// process can compare, so every grant to a task other than the running one
-// interrupts; the RTPU's own scheduler then decides (here: the waiter is
-// less urgent and runs after "busy").
-TEST_F(WakeUrgency, UnderMufEveryGrantToAnotherTaskInterrupts) {
+// FIXED: the V finds "busy" (10) running and leaves the waiter's (5) grant
+// without a signal; halfway through its loop "busy" raises the waiter to
+// 20. The scheduler run of that change takes the grant: the waiter runs
+// at once, not when "busy" is done.
+volatile chm_tid_t g_waiter_tid = CHM_TID_NONE;
+void busy_raising(void*) {
+    chm_task_pause_until(chm_time_now() + 20 * kMs);
+    chm_rsem_t* go = open_sem("go");
+    if (!go || chm_rsem_v(go) != 0) return;
+    const uint64_t end = chm_time_now() + kBusyNs, raise_at = chm_time_now() + kBusyNs / 2;
+    for (bool raised = false; chm_time_now() < end;) {
+        if (!raised && chm_time_now() >= raise_at) raised = chm_task_set_priority(g_waiter_tid, 20) == 0;
+    }
+    g_busy_done = true;
+}
+TEST_F(WakeUrgency, AWaiterRaisedAboveTheRunningTaskTakesTheGrantLeftWithoutASignal) {
+    const Outcome o = run(CHM_SCHED_FIXED, [] {
+        g_waiter_tid = spawn_task(waiter, nullptr, "waiter", 5);
+        return g_waiter_tid != CHM_TID_NONE && spawn_task(busy_raising, nullptr, "busy", 10) != CHM_TID_NONE;
+    }, 1);
+    EXPECT_EQ(o.signals, 0u);
+    EXPECT_EQ(o.child, 0) << "60: the raised waiter's grant waited until \"busy\" was done";
+}
+
+// Under the other policies a ring compares the static part of the order
+// (kernel/sync/remote_wait.cpp, order_number): MUF's critical set, a
+// deadline (RM: a period) before none, then the priority or RM's period.
+chm_tid_t spawn_ordered(void (*fn)(void*), const char* name, int prio, int critical, uint64_t period) {
+    chm_task_attr_t a;
+    chm_task_attr_init(&a);
+    a.name = name;
+    a.priority = prio;
+    a.critical = critical;
+    a.period_ns = period;
+    a.wcet_ns = period ? period / 100 : 0;
+    chm_tid_t id = CHM_TID_NONE;
+    return chm_task_spawn(&id, fn, nullptr, &a) == 0 ? id : CHM_TID_NONE;
+}
+constexpr uint64_t kLongPeriod = 20'000'000'000;  // no deadline falls within a test
+
+// MUF (the default), two aperiodic tasks outside the critical set: the
+// priority orders them, as under FIXED; the waiter (5) waits for "busy" (10).
+TEST_F(WakeUrgency, UnderMufAPriorityOrderedWaiterDoesNotInterruptAMoreUrgentTask) {
     const Outcome o = run(CHM_SCHED_MUF, [] {
         return spawn_task(waiter, nullptr, "waiter", 5) != CHM_TID_NONE &&
                spawn_task(busy, nullptr, "busy", 10) != CHM_TID_NONE;
     }, 0);
+    EXPECT_EQ(o.signals, 0u);
+    EXPECT_EQ(o.child, 0) << "61: the waiter ran before the more urgent task was done";
+}
+
+// MUF: the critical set runs first whatever the priorities: a grant to a
+// waiter outside it (priority 20) leaves a critical "busy" (priority 1) alone.
+TEST_F(WakeUrgency, UnderMufAWaiterOutsideTheCriticalSetDoesNotInterruptACriticalTask) {
+    const Outcome o = run(CHM_SCHED_MUF, [] {
+        return spawn_ordered(waiter, "waiter", 20, 0, 0) != CHM_TID_NONE &&
+               spawn_ordered(busy, "busy", 1, 1, 0) != CHM_TID_NONE;
+    }, 0);
+    EXPECT_EQ(o.signals, 0u);
+    EXPECT_EQ(o.child, 0) << "61: a task outside the critical set ran before a critical one";
+}
+
+// MUF: a critical waiter (priority 1) interrupts "busy" outside the set (10).
+TEST_F(WakeUrgency, UnderMufACriticalWaiterInterruptsATaskOutsideTheSet) {
+    const Outcome o = run(CHM_SCHED_MUF, [] {
+        return spawn_ordered(waiter, "waiter", 1, 1, 0) != CHM_TID_NONE &&
+               spawn_ordered(busy, "busy", 10, 0, 0) != CHM_TID_NONE;
+    }, 1);
     EXPECT_EQ(o.signals, 1u);
-    EXPECT_EQ(o.child, 0);
+    EXPECT_EQ(o.child, 0) << "60: the critical waiter waited for a task outside the set";
+}
+
+// RM: a shorter period outranks; "busy" has the longer one.
+TEST_F(WakeUrgency, UnderRmAWaiterWithAShorterPeriodInterrupts) {
+    const Outcome o = run(CHM_SCHED_RM, [] {
+        return spawn_ordered(waiter, "waiter", 1, 0, kLongPeriod / 2) != CHM_TID_NONE &&
+               spawn_ordered(busy, "busy", 10, 0, kLongPeriod) != CHM_TID_NONE;
+    }, 1);
+    EXPECT_EQ(o.signals, 1u);
+    EXPECT_EQ(o.child, 0) << "60: the shorter period waited for the longer one";
+}
+
+// RM: a longer period does not, whatever its priority.
+TEST_F(WakeUrgency, UnderRmAWaiterWithALongerPeriodDoesNotInterrupt) {
+    const Outcome o = run(CHM_SCHED_RM, [] {
+        return spawn_ordered(waiter, "waiter", 99, 0, kLongPeriod) != CHM_TID_NONE &&
+               spawn_ordered(busy, "busy", 1, 0, kLongPeriod / 2) != CHM_TID_NONE;
+    }, 0);
+    EXPECT_EQ(o.signals, 0u);
+    EXPECT_EQ(o.child, 0) << "61: the longer period ran before the shorter one was done";
+}
+
+// EDF: deadlines move while a task runs, so two tasks with deadlines are
+// not compared by number: the grant interrupts and the RTPU's scheduler
+// decides (the waiter's deadline is later: it runs after "busy").
+TEST_F(WakeUrgency, UnderEdfAGrantBetweenTasksWithDeadlinesInterruptsAndTheSchedulerDecides) {
+    const Outcome o = run(CHM_SCHED_EDF, [] {
+        return spawn_ordered(waiter, "waiter", 99, 0, kLongPeriod) != CHM_TID_NONE &&
+               spawn_ordered(busy, "busy", 1, 0, kLongPeriod / 2) != CHM_TID_NONE;
+    }, 0);
+    EXPECT_EQ(o.signals, 1u);
+    EXPECT_EQ(o.child, 0) << "61: the later deadline ran before the earlier one was done";
+}
+
+// EDF: a task without a deadline never outranks one with a deadline.
+TEST_F(WakeUrgency, UnderEdfAWaiterWithoutADeadlineDoesNotInterrupt) {
+    const Outcome o = run(CHM_SCHED_EDF, [] {
+        return spawn_ordered(waiter, "waiter", 99, 0, 0) != CHM_TID_NONE &&
+               spawn_ordered(busy, "busy", 1, 0, kLongPeriod) != CHM_TID_NONE;
+    }, 0);
+    EXPECT_EQ(o.signals, 0u);
+    EXPECT_EQ(o.child, 0) << "61: a task without a deadline ran before one with a deadline";
 }
 
 }  // namespace

@@ -325,11 +325,13 @@ bool doorbell_raised();
 // timer signal, or nothing while it polls). Any thread or process; async-
 // signal-safe.
 void doorbell_ring(const Doorbell& db, std::uint32_t bits, int pid, int tid, RingFor why = kRingInterrupt);
-// Publish what this RTPU runs now (the kernel's switch, mask held): a no-op
-// unless the doorbell has running/urgency words. When the published state
-// may let a skipped ring matter (another task, or a lower urgency), the
-// doorbell's pending vectors are looked at after the store, and kPendingRing
-// marks them for the next irq_restore: no ring is left behind a switch.
+// Publish what this RTPU runs now (the kernel's switch and scheduler, mask
+// held): a no-op unless the doorbell has running/urgency words. When the
+// published state may let a skipped ring matter (another task, or a lower
+// urgency), or when nothing changed (the scheduler ran without a switch:
+// some task's order may have), the doorbell's pending vectors are looked
+// at, and kPendingRing marks them for the next irq_restore: no ring is
+// left behind a switch or a change of order.
 void doorbell_publish_locked(std::uint32_t running, std::uint32_t urgency);
 inline bool g_db_publishes = false;  // the doorbell in use has those words
 // How many rings carrying vectors this process made, and how many of them

@@ -27,30 +27,70 @@ namespace {
 
 std::uint32_t task_id(const Tcb* t) { return std::uint32_t(tid_of(t)) + 1; }
 
-// Priorities in an unsigned order. 0 stays free for "the lowest" (what
-// the deadline policies publish) and UINT32_MAX for "interrupt whatever
-// runs" (their waiters, and vectors with handlers).
-std::uint32_t fixed_urgency(int priority) {
-    const std::uint32_t u = std::uint32_t(priority) ^ 0x80000000u;
-    return u == 0 ? 1 : u == UINT32_MAX ? UINT32_MAX - 1 : u;
+// A task's place in its RTPU's order as one number another process can
+// compare (port::RingFor): a grant interrupts the running task when the
+// waiter's number is higher than the one published for it. Only the
+// static part of the policy's order is in it:
+//  * the class (top bits), classes that never mix: MUF's critical set
+//    before the rest; within that, tasks with a deadline (RM: a period)
+//    before tasks without, which every built-in policy orders by priority;
+//  * within a class, the priority (FIXED, and tasks without a deadline),
+//    or RM's period (coarsened to 28 bits: a waiter in the running task's
+//    bucket interrupts it);
+//  * where the order moves while a task runs (EDF's deadlines, MLF's and
+//    MUF's laxity) a waiter's number is its class's highest and the
+//    running task's its lowest: the grant interrupts and the RTPU's own
+//    scheduler decides, as under a user policy (always).
+// The running task's number is republished at every switch and by
+// schedule_locked (a priority or flag changed without one).
+enum class Side { kWaiter, kRunning };
+
+constexpr int kLowBits = 29;
+constexpr std::uint32_t kLowMax = (1u << kLowBits) - 1;
+
+std::uint32_t by_priority(int priority, Side side) {
+    constexpr int kHalf = 1 << (kLowBits - 1);
+    if (priority < -kHalf || priority >= kHalf)  // beyond the scale: interrupt
+        return side == Side::kWaiter ? kLowMax : 0;
+    return std::uint32_t(priority + kHalf);
 }
 
-bool priority_is_the_order() { return g_k.builtin && g_k.policy == CHM_SCHED_FIXED; }
+// Shorter periods higher: 6 bits of exponent and 22 of mantissa, doubled
+// so that a waiter in the running task's bucket is higher.
+std::uint32_t by_period(std::uint64_t period, Side side) {
+    const int exp = 63 - __builtin_clzll(period);
+    const std::uint64_t mant = exp > 22 ? period >> (exp - 22) : period << (22 - exp);
+    const std::uint32_t key = std::uint32_t(exp) << 22 | std::uint32_t(mant & ((1u << 22) - 1));
+    return 2 * (((1u << 28) - 1) - key) + (side == Side::kWaiter ? 1 : 0);
+}
+
+std::uint32_t order_number(const chm_sched_task_t& s, Side side) {
+    if (!g_k.builtin) return side == Side::kWaiter ? UINT32_MAX : 0;
+    if (g_k.policy == CHM_SCHED_FIXED) return by_priority(s.priority, side);
+    const std::uint64_t major = rq_key(g_k.policy, &s).major;
+    const bool keyed = (major & kKeyNever) != kKeyNever;  // a deadline (RM: a period)
+    const bool critical = g_k.policy == CHM_SCHED_MUF && !(major >> 63);
+    const std::uint32_t cls = (critical ? 2u : 0u) + (keyed ? 1u : 0u);
+    std::uint32_t low;
+    if (!keyed) low = by_priority(s.priority, side);
+    else if (g_k.policy == CHM_SCHED_RM) low = by_period(major, side);
+    else low = side == Side::kWaiter ? kLowMax : 0;
+    return cls << kLowBits | low;
+}
 
 }  // namespace
 
 std::uint32_t remote_waiter_id() { return remote_wait_possible() ? task_id(g_k.current) : 0; }
 
 std::uint32_t remote_waiter_urgency() {
-    if (!priority_is_the_order()) return UINT32_MAX;
     const Tcb* cur = port::on_kernel_thread() ? g_k.current : nullptr;
-    return cur ? fixed_urgency(cur->s.priority) : UINT32_MAX;
+    return cur ? order_number(cur->s, Side::kWaiter) : UINT32_MAX;
 }
 
 void publish_running_locked() {
     const Tcb* t = g_k.current;
     if (!t) return port::doorbell_publish_locked(0, 0);
-    port::doorbell_publish_locked(task_id(t), priority_is_the_order() ? fixed_urgency(t->s.priority) : 0);
+    port::doorbell_publish_locked(task_id(t), order_number(t->s, Side::kRunning));
 }
 
 void remote_scan_locked() {

@@ -28,13 +28,14 @@ int remote_waiter_priority();
 // its RTPU (port::RingFor), recorded beside the word it waits on:
 //  * its id as this RTPU publishes it while it runs (never 0; 0 when the
 //    caller is not a task that can park);
-//  * its urgency on the scale this RTPU publishes for the running task.
-//    Under FIXED the scale is the priority, so a grant to a waiter that
-//    does not outrank the running task waits for the next switch. Under
-//    the other policies the order is not a number another process can
-//    compare (deadlines, laxity): the waiter's urgency is the highest and
-//    the running task's the lowest, so every grant interrupts, except one
-//    for the running task itself.
+//  * its urgency on the scale this RTPU publishes for the running task:
+//    the static part of the policy's order (MUF's critical set, a deadline
+//    or RM period before none, then the priority or RM's period), so a
+//    grant to a waiter that does not outrank the running task waits for
+//    the next switch or scheduler run. Where the order moves while a task
+//    runs (two tasks with deadlines under EDF, MLF or MUF) the waiter's
+//    urgency is the highest of its class and the running task's the
+//    lowest, so the grant interrupts and the RTPU's scheduler decides.
 std::uint32_t remote_waiter_id();
 std::uint32_t remote_waiter_urgency();
 

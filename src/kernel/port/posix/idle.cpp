@@ -51,7 +51,14 @@ void doorbell_use(const Doorbell* db) {
 
 void doorbell_publish_locked(std::uint32_t running, std::uint32_t urgency) {
     if (!g_db_publishes) return;
-    if (running == g_published_running && urgency == g_published_urgency) return;
+    if (running == g_published_running && urgency == g_published_urgency) {
+        // The scheduler ran without a switch: a task's order may have
+        // changed (a priority set or lent, MUF's critical set), a waiter's
+        // too, past the number its record holds. A ring left without a
+        // signal is taken now rather than at the next switch.
+        if (running && load(g_db.pending)) irq_mark_pending(kPendingRing);
+        return;
+    }
     const bool may_matter = running != g_published_running || urgency < g_published_urgency;
     g_published_running = running;
     g_published_urgency = urgency;
