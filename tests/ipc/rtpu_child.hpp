@@ -37,13 +37,15 @@ int run_rtpu(const std::string& path, int slot, Spawn spawn_tasks, RtpuOptions o
 }
 
 // A task of priority `prio` (periodic when `period` > 0, with a small
-// declared WCET); CHM_TID_NONE when the spawn failed.
+// declared WCET; in MUF's critical set when `critical`); CHM_TID_NONE when
+// the spawn failed.
 inline chm_tid_t spawn_task(void (*fn)(void*), void* arg, const char* name, int prio, std::uint64_t period = 0,
-                            chm_deadline_handler_t on_deadline = nullptr) {
+                            chm_deadline_handler_t on_deadline = nullptr, int critical = 0) {
     chm_task_attr_t a;
     chm_task_attr_init(&a);
     a.name = name;
     a.priority = prio;
+    a.critical = critical;
     a.period_ns = period;
     a.wcet_ns = period ? 50000 : 0;
     a.on_deadline = on_deadline;

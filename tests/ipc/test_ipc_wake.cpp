@@ -5,6 +5,8 @@
 // wait is bounded; nothing asserts speed (the busy loops only make an
 // order observable).
 #include <cerrno>
+#include <ostream>
+#include <string>
 
 #include "chimera/chimera.h"
 #include "chimera/rsem.h"
@@ -255,93 +257,57 @@ TEST_F(WakeUrgency, AWaiterRaisedAboveTheRunningTaskTakesTheGrantLeftWithoutASig
 
 // Under the other policies a ring compares the static part of the order
 // (kernel/sync/remote_wait.cpp, order_number): MUF's critical set, a
-// deadline (RM: a period) before none, then the priority or RM's period.
-chm_tid_t spawn_ordered(void (*fn)(void*), const char* name, int prio, int critical, uint64_t period) {
-    chm_task_attr_t a;
-    chm_task_attr_init(&a);
-    a.name = name;
-    a.priority = prio;
-    a.critical = critical;
-    a.period_ns = period;
-    a.wcet_ns = period ? period / 100 : 0;
-    chm_tid_t id = CHM_TID_NONE;
-    return chm_task_spawn(&id, fn, nullptr, &a) == 0 ? id : CHM_TID_NONE;
-}
-constexpr uint64_t kLongPeriod = 20'000'000'000;  // no deadline falls within a test
+// deadline (RM: a period) before none, then the priority or RM's period;
+// two tasks with deadlines under EDF, MLF or MUF are not compared by
+// number: the grant interrupts and the RTPU's scheduler decides.
+struct Ordered {
+    int prio;
+    int critical;     // MUF
+    uint64_t period;  // 0: aperiodic (no deadline)
+};
+struct OrderCase {
+    const char* name;
+    chm_sched_policy policy;
+    Ordered waiter, busy;
+    std::uint32_t signals;  // the V's directed signals
+    int during;             // 1: the waiter ran while "busy" computed
+};
+constexpr uint64_t kLong = 20'000'000'000;  // no deadline falls within a test
+const OrderCase kOrderCases[] = {
+    // Aperiodic, outside the critical set: the priority, as under FIXED.
+    {"MufPriorityOfAperiodicTasks", CHM_SCHED_MUF, {5, 0, 0}, {10, 0, 0}, 0, 0},
+    // The critical set first, whatever the priorities.
+    {"MufCriticalRunningTaskLeftAlone", CHM_SCHED_MUF, {20, 0, 0}, {1, 1, 0}, 0, 0},
+    {"MufCriticalWaiterInterrupts", CHM_SCHED_MUF, {1, 1, 0}, {10, 0, 0}, 1, 1},
+    // The shorter period first, whatever the priorities.
+    {"RmShorterPeriodInterrupts", CHM_SCHED_RM, {1, 0, kLong / 2}, {10, 0, kLong}, 1, 1},
+    {"RmLongerPeriodDoesNot", CHM_SCHED_RM, {99, 0, kLong}, {1, 0, kLong / 2}, 0, 0},
+    // Two deadlines: a signal, then EDF runs the earlier one first.
+    {"EdfTwoDeadlinesInterruptAndTheSchedulerDecides", CHM_SCHED_EDF, {99, 0, kLong}, {1, 0, kLong / 2}, 1, 0},
+    {"EdfNoDeadlineDoesNotInterruptADeadline", CHM_SCHED_EDF, {99, 0, 0}, {1, 0, kLong}, 0, 0},
+};
 
-// MUF (the default), two aperiodic tasks outside the critical set: the
-// priority orders them, as under FIXED; the waiter (5) waits for "busy" (10).
-TEST_F(WakeUrgency, UnderMufAPriorityOrderedWaiterDoesNotInterruptAMoreUrgentTask) {
-    const Outcome o = run(CHM_SCHED_MUF, [] {
-        return spawn_task(waiter, nullptr, "waiter", 5) != CHM_TID_NONE &&
-               spawn_task(busy, nullptr, "busy", 10) != CHM_TID_NONE;
-    }, 0);
-    EXPECT_EQ(o.signals, 0u);
-    EXPECT_EQ(o.child, 0) << "61: the waiter ran before the more urgent task was done";
-}
+void PrintTo(const OrderCase& c, std::ostream* os) { *os << c.name; }
 
-// MUF: the critical set runs first whatever the priorities: a grant to a
-// waiter outside it (priority 20) leaves a critical "busy" (priority 1) alone.
-TEST_F(WakeUrgency, UnderMufAWaiterOutsideTheCriticalSetDoesNotInterruptACriticalTask) {
-    const Outcome o = run(CHM_SCHED_MUF, [] {
-        return spawn_ordered(waiter, "waiter", 20, 0, 0) != CHM_TID_NONE &&
-               spawn_ordered(busy, "busy", 1, 1, 0) != CHM_TID_NONE;
-    }, 0);
-    EXPECT_EQ(o.signals, 0u);
-    EXPECT_EQ(o.child, 0) << "61: a task outside the critical set ran before a critical one";
-}
-
-// MUF: a critical waiter (priority 1) interrupts "busy" outside the set (10).
-TEST_F(WakeUrgency, UnderMufACriticalWaiterInterruptsATaskOutsideTheSet) {
-    const Outcome o = run(CHM_SCHED_MUF, [] {
-        return spawn_ordered(waiter, "waiter", 1, 1, 0) != CHM_TID_NONE &&
-               spawn_ordered(busy, "busy", 10, 0, 0) != CHM_TID_NONE;
-    }, 1);
-    EXPECT_EQ(o.signals, 1u);
-    EXPECT_EQ(o.child, 0) << "60: the critical waiter waited for a task outside the set";
+OrderCase g_case;  // the case the forked RTPU spawns
+bool spawn_case() {
+    const auto spawn = [](void (*fn)(void*), const char* name, const Ordered& o) {
+        return spawn_task(fn, nullptr, name, o.prio, o.period, nullptr, o.critical) != CHM_TID_NONE;
+    };
+    return spawn(waiter, "waiter", g_case.waiter) && spawn(busy, "busy", g_case.busy);
 }
 
-// RM: a shorter period outranks; "busy" has the longer one.
-TEST_F(WakeUrgency, UnderRmAWaiterWithAShorterPeriodInterrupts) {
-    const Outcome o = run(CHM_SCHED_RM, [] {
-        return spawn_ordered(waiter, "waiter", 1, 0, kLongPeriod / 2) != CHM_TID_NONE &&
-               spawn_ordered(busy, "busy", 10, 0, kLongPeriod) != CHM_TID_NONE;
-    }, 1);
-    EXPECT_EQ(o.signals, 1u);
-    EXPECT_EQ(o.child, 0) << "60: the shorter period waited for the longer one";
-}
+class WakeOrder : public WakeUrgency, public ::testing::WithParamInterface<OrderCase> {};
 
-// RM: a longer period does not, whatever its priority.
-TEST_F(WakeUrgency, UnderRmAWaiterWithALongerPeriodDoesNotInterrupt) {
-    const Outcome o = run(CHM_SCHED_RM, [] {
-        return spawn_ordered(waiter, "waiter", 99, 0, kLongPeriod) != CHM_TID_NONE &&
-               spawn_ordered(busy, "busy", 1, 0, kLongPeriod / 2) != CHM_TID_NONE;
-    }, 0);
-    EXPECT_EQ(o.signals, 0u);
-    EXPECT_EQ(o.child, 0) << "61: the longer period ran before the shorter one was done";
+TEST_P(WakeOrder, AGrantInterruptsTheRunningTaskOnlyWhenTheWaiterMayOutrankIt) {
+    g_case = GetParam();
+    const Outcome o = run(g_case.policy, spawn_case, g_case.during);
+    EXPECT_EQ(o.signals, g_case.signals);
+    EXPECT_EQ(o.child, 0) << (o.child == 60 ? "60: the waiter ran only after \"busy\""
+                                            : "61: the waiter ran while \"busy\" computed");
 }
-
-// EDF: deadlines move while a task runs, so two tasks with deadlines are
-// not compared by number: the grant interrupts and the RTPU's scheduler
-// decides (the waiter's deadline is later: it runs after "busy").
-TEST_F(WakeUrgency, UnderEdfAGrantBetweenTasksWithDeadlinesInterruptsAndTheSchedulerDecides) {
-    const Outcome o = run(CHM_SCHED_EDF, [] {
-        return spawn_ordered(waiter, "waiter", 99, 0, kLongPeriod) != CHM_TID_NONE &&
-               spawn_ordered(busy, "busy", 1, 0, kLongPeriod / 2) != CHM_TID_NONE;
-    }, 0);
-    EXPECT_EQ(o.signals, 1u);
-    EXPECT_EQ(o.child, 0) << "61: the later deadline ran before the earlier one was done";
-}
-
-// EDF: a task without a deadline never outranks one with a deadline.
-TEST_F(WakeUrgency, UnderEdfAWaiterWithoutADeadlineDoesNotInterrupt) {
-    const Outcome o = run(CHM_SCHED_EDF, [] {
-        return spawn_ordered(waiter, "waiter", 99, 0, 0) != CHM_TID_NONE &&
-               spawn_ordered(busy, "busy", 1, 0, kLongPeriod) != CHM_TID_NONE;
-    }, 0);
-    EXPECT_EQ(o.signals, 0u);
-    EXPECT_EQ(o.child, 0) << "61: a task without a deadline ran before one with a deadline";
-}
+INSTANTIATE_TEST_SUITE_P(Policies, WakeOrder, ::testing::ValuesIn(kOrderCases),
+                         [](const ::testing::TestParamInfo<OrderCase>& i) { return std::string(i.param.name); });
 
 }  // namespace
 }  // namespace chm::test
