@@ -221,8 +221,9 @@ struct Kernel {
     Hook hooks[32];
     int nhooks = 0;
 
-    // Statistics.
-    std::uint64_t ticks = 0, switches = 0;
+    // Statistics. remote_parks: remote waits that parked their task (a
+    // wait granted while it spun is not one).
+    std::uint64_t ticks = 0, switches = 0, remote_parks = 0;
 };
 
 extern Kernel g_k;

@@ -247,6 +247,7 @@ int remote_wait(std::uint32_t* word, std::int64_t timeout_ns) {
     cur->interruptible = true;
     cur->wait_result = 0;
     waitq_insert_locked(&g_remote, cur);
+    ++g_k.remote_parks;
     const std::uint64_t now = now_locked();
     if (timeout_ns > 0) {
         cur->tmr.kind = TimerKind::Wake;
