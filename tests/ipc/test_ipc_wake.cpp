@@ -274,6 +274,8 @@ struct OrderCase {
 };
 constexpr uint64_t kLong = 20'000'000'000;  // no deadline falls within a test
 const OrderCase kOrderCases[] = {
+    // A priority beyond the number's scale still outranks one within it.
+    {"FixedPriorityBeyondTheScaleInterrupts", CHM_SCHED_FIXED, {1 << 30, 0, 0}, {(1 << 28) - 1, 0, 0}, 1, 1},
     // Aperiodic, outside the critical set: the priority, as under FIXED.
     {"MufPriorityOfAperiodicTasks", CHM_SCHED_MUF, {5, 0, 0}, {10, 0, 0}, 0, 0},
     // The critical set first, whatever the priorities.

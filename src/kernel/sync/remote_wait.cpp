@@ -48,10 +48,11 @@ enum class Side { kWaiter, kRunning };
 constexpr int kLowBits = 29;
 constexpr std::uint32_t kLowMax = (1u << kLowBits) - 1;
 
+// 1 .. kLowMax - 1; a priority beyond that scale is the top for a waiter
+// and the bottom for the running task: the grant interrupts.
 std::uint32_t by_priority(int priority, Side side) {
     constexpr int kHalf = 1 << (kLowBits - 1);
-    if (priority < -kHalf || priority >= kHalf)  // beyond the scale: interrupt
-        return side == Side::kWaiter ? kLowMax : 0;
+    if (priority <= -kHalf || priority >= kHalf - 1) return side == Side::kWaiter ? kLowMax : 0;
     return std::uint32_t(priority + kHalf);
 }
 
