@@ -51,28 +51,27 @@ void doorbell_use(const Doorbell* db) {
 
 void doorbell_publish_locked(std::uint32_t running, std::uint32_t urgency) {
     if (!g_db_publishes) return;
-    if (running == g_published_running && urgency == g_published_urgency) {
-        // The scheduler ran without a switch: a task's order may have
-        // changed (a priority set or lent, MUF's critical set), a waiter's
-        // too, past the number its record holds. A ring left without a
-        // signal is taken now rather than at the next switch.
-        if (running && load(g_db.pending)) irq_mark_pending(kPendingRing);
-        return;
+    if (running != g_published_running || urgency != g_published_urgency) {
+        const bool may_matter = running != g_published_running || urgency < g_published_urgency;
+        g_published_running = running;
+        g_published_urgency = urgency;
+        __atomic_store_n(g_db.urgency, urgency, __ATOMIC_RELAXED);
+        if (!may_matter) {
+            __atomic_store_n(g_db.running, running, __ATOMIC_RELEASE);
+            return;
+        }
+        // Against doorbell_ring: it sets `pending` then reads what we
+        // publish; we publish then read `pending`. One of the two sees the
+        // other, so a ring that skipped its signal for the task we leave is
+        // taken below.
+        store(g_db.running, running);
     }
-    const bool may_matter = running != g_published_running || urgency < g_published_urgency;
-    g_published_running = running;
-    g_published_urgency = urgency;
-    __atomic_store_n(g_db.urgency, urgency, __ATOMIC_RELAXED);
-    if (!may_matter) {
-        __atomic_store_n(g_db.running, running, __ATOMIC_RELEASE);
-        return;
-    }
-    // Against doorbell_ring: it sets `pending` then reads what we publish;
-    // we publish then read `pending`. One of the two sees the other, so a
-    // ring that skipped its signal for the task we leave is taken here.
-    store(g_db.running, running);
-    // (To the idle loop, running 0: it dispatches `pending` by itself.)
-    if (load(g_db.pending) && running) irq_mark_pending(kPendingRing);
+    // Reached too when nothing changed: the scheduler ran without a switch,
+    // and a task's order may have changed (a priority set or lent, MUF's
+    // critical set), a waiter's too, past the number its record holds. A
+    // ring left without a signal is taken now rather than at the next
+    // switch. (To the idle loop, running 0: it dispatches `pending` itself.)
+    if (running && load(g_db.pending)) irq_mark_pending(kPendingRing);
 }
 
 const Doorbell& doorbell() { return g_db; }
