@@ -25,15 +25,15 @@
 #include <cstdint>
 #include <cstdio>
 #include <new>
-#include <stdexcept>
 #include <string>
 
 #include "../harness.hpp"
 #include "../kernel/kbench.hpp"  // kb::ticks, kb::tick_clock
+#include "../peers/cacheline.hpp"
 #include "chimera/bp.h"
 #include "chimera/rsem.h"
 #include "chimera/shm.h"
-#include "port.hpp"  // the doorbell's ring counters, relax()
+#include "port.hpp"  // the doorbell's ring counters
 #include "rtpu.hpp"
 
 namespace chm::bench {
@@ -177,54 +177,27 @@ CHM_BENCH_MEASUREMENT(rsem_wake_local_row, "remote_semv_wake_local");
 // and forth. RT/2 = a V on one RTPU until the task it wakes on the other
 // runs.
 
-// The cache-line floor between the same two tasks, in common memory: the
-// line that moves, and (on a line of its own) what the partner does when
-// a V wakes it.
-struct alignas(64) FloorLine {
-    std::atomic<std::uint64_t> seq{0};
-};
+// The cache-line floor between the same two tasks (../peers/cacheline.hpp),
+// in common memory: the line that moves, and (on a line of its own) what
+// the partner does when a V wakes it.
 struct Floor {
-    FloorLine line;
-    alignas(64) std::atomic<std::uint32_t> pass_line{0};  // 1: answer the line until kStop
+    PingLine line;
+    alignas(64) std::atomic<std::uint32_t> pass_line{0};  // 1: answer the line until kPingStop
 };
-constexpr std::uint64_t kStop = UINT64_MAX;
 
 Floor* floor_in(void* segment) {
     const auto p = reinterpret_cast<std::uintptr_t>(segment);
     return reinterpret_cast<Floor*>((p + 63) & ~std::uintptr_t(63));
 }
 
-// The partner's side: answer every odd value with the next even one.
-void answer_line(FloorLine& l) {
-    for (std::uint64_t want = 1;;) {
-        const std::uint64_t v = l.seq.load(std::memory_order_acquire);
-        if (v == want) {
-            l.seq.store(want + 1, std::memory_order_release);
-            want += 2;
-        } else if (v == kStop) {
-            return;
-        } else {
-            chm::port::relax();
-        }
-    }
-}
-
 // `n` hand-offs of the line and back (the bench's side); the partner's
-// task is woken into answer_line and back out by the two semaphores.
+// task is woken into answer_pings and back out by the two semaphores.
 double pass_line(Floor& fl, chm_rsem_t* ping, chm_rsem_t* pong, std::uint64_t n) {
     fl.line.seq.store(0, std::memory_order_relaxed);
     fl.pass_line.store(1, std::memory_order_relaxed);
     check_rsem(chm_rsem_v(ping), "chm_rsem_v");  // publishes both stores
-    const std::uint64_t t0 = mono_ns();
-    for (std::uint64_t v = 0; v < 2 * n; v += 2) {
-        fl.line.seq.store(v + 1, std::memory_order_release);
-        for (std::uint32_t spins = 0; fl.line.seq.load(std::memory_order_acquire) != v + 2;) {
-            chm::port::relax();
-            if (++spins == 0 && abort_reason()) throw std::runtime_error(abort_reason());
-        }
-    }
-    const double ns = double(mono_ns() - t0);
-    fl.line.seq.store(kStop, std::memory_order_release);
+    const double ns = send_pings(fl.line, n);
+    fl.line.seq.store(kPingStop, std::memory_order_release);
     check_rsem(chm_rsem_p(pong), "chm_rsem_p");
     fl.pass_line.store(0, std::memory_order_relaxed);
     return ns;
@@ -256,7 +229,7 @@ void rsem_xrtpu(Session& s, const std::string& row, std::uint64_t poll_ns, const
             Floor& fl = *floor_in(seg);
             for (;;) {
                 check_rsem(chm_rsem_p(pi), "chm_rsem_p");
-                if (fl.pass_line.load(std::memory_order_relaxed)) answer_line(fl.line);
+                if (fl.pass_line.load(std::memory_order_relaxed)) answer_pings(fl.line);
                 check_rsem(chm_rsem_v(po), "chm_rsem_v");
             }
         };
