@@ -195,28 +195,6 @@ protected:
     }
 };
 
-// FIXED: the waiter (5) does not outrank the running task (10). The V sets
-// the grant vector without a signal; the waiter runs when "busy" is done.
-TEST_F(WakeUrgency, AGrantToALessUrgentWaiterDoesNotInterruptTheRunningTask) {
-    const Outcome o = run(CHM_SCHED_FIXED, [] {
-        return spawn_task(waiter, nullptr, "waiter", 5) != CHM_TID_NONE &&
-               spawn_task(busy, nullptr, "busy", 10) != CHM_TID_NONE;
-    }, 0);
-    EXPECT_EQ(o.signals, 0u);
-    EXPECT_EQ(o.child, 0) << "61: the waiter ran before the more urgent task was done";
-}
-
-// FIXED: the waiter (20) outranks the running task (10): the V interrupts
-// it with a directed signal and the waiter runs at once.
-TEST_F(WakeUrgency, AGrantToAMoreUrgentWaiterInterruptsTheRunningTask) {
-    const Outcome o = run(CHM_SCHED_FIXED, [] {
-        return spawn_task(waiter, nullptr, "waiter", 20) != CHM_TID_NONE &&
-               spawn_task(busy, nullptr, "busy", 10) != CHM_TID_NONE;
-    }, 1);
-    EXPECT_EQ(o.signals, 1u);
-    EXPECT_EQ(o.child, 0) << "60: the waiter waited for the less urgent task";
-}
-
 // FIXED: the V finds "busy" (10) running and leaves the waiter's (7) grant
 // without a signal; when "busy" ends, the RTPU switches to "middle" (5),
 // less urgent than the waiter. That switch must take the grant: the waiter
@@ -255,7 +233,7 @@ TEST_F(WakeUrgency, AWaiterRaisedAboveTheRunningTaskTakesTheGrantLeftWithoutASig
     EXPECT_EQ(o.child, 0) << "60: the raised waiter's grant waited until \"busy\" was done";
 }
 
-// Under the other policies a ring compares the static part of the order
+// Each policy's ring compares the static part of its order
 // (kernel/sync/remote_wait.cpp, order_number): MUF's critical set, a
 // deadline (RM: a period) before none, then the priority or RM's period;
 // two tasks with deadlines under EDF, MLF or MUF are not compared by
@@ -274,6 +252,11 @@ struct OrderCase {
 };
 constexpr uint64_t kLong = 20'000'000'000;  // no deadline falls within a test
 const OrderCase kOrderCases[] = {
+    // FIXED: the priority. A waiter that does not outrank "busy" gets the
+    // grant vector without a signal and runs when "busy" is done; one that
+    // outranks it interrupts it and runs at once.
+    {"FixedLessUrgentWaiterWaits", CHM_SCHED_FIXED, {5, 0, 0}, {10, 0, 0}, 0, 0},
+    {"FixedMoreUrgentWaiterInterrupts", CHM_SCHED_FIXED, {20, 0, 0}, {10, 0, 0}, 1, 1},
     // A priority beyond the number's scale still outranks one within it.
     {"FixedPriorityBeyondTheScaleInterrupts", CHM_SCHED_FIXED, {1 << 30, 0, 0}, {(1 << 28) - 1, 0, 0}, 1, 1},
     // Aperiodic, outside the critical set: the priority, as under FIXED.
