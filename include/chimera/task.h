@@ -22,13 +22,18 @@ enum chm_deadline_action {
     CHM_DL_STOP_RTPU = 2     /* chm_kernel_stop(): shutdown hooks, then stop */
 };
 
-/* Facts handed to a deadline-failure handler. */
+/* Facts handed to a deadline-failure handler. The handler runs once for
+ * every run of misses that pass before it can run (the task was preempted
+ * or is running late through several deadlines): `cycle` and
+ * `deadline_ns` are the latest miss, `unhandled` says how many deadlines
+ * passed since the handler last ran (>= 1), `misses` the task's total. */
 typedef struct chm_deadline_info {
     chm_tid_t task;
-    uint64_t cycle;          /* the cycle that missed (0-based) */
+    uint64_t cycle;          /* the cycle that missed last (0-based) */
     uint64_t deadline_ns;    /* its absolute deadline */
     uint64_t now_ns;         /* when the handler runs */
     uint64_t misses;         /* misses so far, this one included */
+    uint64_t unhandled;      /* misses this call handles (since the last call) */
 } chm_deadline_info_t;
 
 /* Runs in the failing task's context (at handler_priority if set). To
@@ -126,7 +131,12 @@ typedef struct chm_task_status {
     size_t stack_high_water;  /* most stack ever used, bytes */
 } chm_task_status_t;
 
-/* Snapshot of a task. Errors: -ESRCH, -EINVAL NULL. */
+/* Snapshot of a task. A task that ended stays readable (state
+ * CHM_TASK_ENDED, its final counters; stack_high_water as measured when its
+ * stack was released) until its slot is taken by a new task: slots are
+ * reused oldest-freed first, so at least until as many tasks have been
+ * spawned as there were free slots when it ended.
+ * Errors: -ESRCH unknown task (or ended and its slot reused), -EINVAL NULL. */
 int chm_task_status(chm_tid_t task, chm_task_status_t* out);
 
 /* Number of tasks alive. Any context. */

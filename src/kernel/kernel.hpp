@@ -97,6 +97,7 @@ struct Tcb {
 
     // Periodic timing and deadline failures.
     std::uint64_t cycle = 0;          // index of the current cycle
+    std::uint64_t releases = 0;       // cycles released so far
     bool miss_pending = false;        // handler owed for cycle `missed_cycle`
     std::uint64_t missed_cycle = 0;
     std::uint64_t missed_deadline = 0;
@@ -114,6 +115,8 @@ struct Tcb {
     std::uint64_t misses = 0;
     std::uint64_t worst_lateness = 0;
     std::uint64_t worst_cycle_cpu = 0;
+    std::uint64_t misses_unhandled = 0;  // since its deadline handler last ran
+    std::size_t final_high_water = 0;    // stack high water when the stack was released
 
     // Priority inheritance: the view fields this task owns while it lends
     // a waiter's urgency.
@@ -132,6 +135,8 @@ struct Tcb {
 };
 
 inline constexpr std::uint32_t kMaxTasks = 32768;
+
+inline std::uint32_t timer_order(const TimerNode* n) { return n->owner ? n->owner->index + 1 : 0; }
 
 inline Tcb* tcb_of(chm_sched_task_t* s) {
     return reinterpret_cast<Tcb*>(reinterpret_cast<char*>(s) - offsetof(Tcb, s));
@@ -159,8 +164,14 @@ private:
     std::size_t size_ = 0, cap_ = 0;
 };
 
+// Timers due at the same instant fire in task-index order (spawn order in
+// a fresh kernel): simultaneous releases arrive in a defined order, which
+// decides first come among equals (sched.h). Owner-less timers first.
 struct TimerLess {
-    bool operator()(const TimerNode* a, const TimerNode* b) const { return a->due < b->due; }
+    bool operator()(const TimerNode* a, const TimerNode* b) const {
+        if (a->due != b->due) return a->due < b->due;
+        return timer_order(a) < timer_order(b);
+    }
 };
 struct TimerSlot {
     static void set(TimerNode* n, std::int32_t i) { n->idx = i; }
@@ -200,7 +211,9 @@ struct Kernel {
     TimerHeap timers;
     std::uint64_t vnow = 0;           // virtual clock
     std::uint64_t switched_in_at = 0; // CPU accounting of `current`
-    std::uint64_t quantum_due = 0;    // round robin of `current`
+    std::uint64_t quantum_due = 0;    // end of `current`'s quantum, when armed
+    std::uint64_t slice_start = 0;    // when `current` was dispatched: its quanta end slice_start + k*q
+    bool decision_owed = false;       // virtual clock: timers fired as a task's work ended
     std::uint64_t armed_at = 0;       // what the port timer is set to (0 none)
     std::uint64_t now_cache = 0;      // last clock reading
 
@@ -209,7 +222,8 @@ struct Kernel {
     Tcb* tcbs = nullptr;
     std::uint32_t tcb_hw = 0;       // slots ever used
     std::uint32_t alive = 0;
-    std::int32_t free_slot = -1;    // recycled slots, linked through Tcb::next_free
+    std::int32_t free_slot = -1;    // recycled slots, oldest first, linked through Tcb::next_free
+    std::int32_t free_tail = -1;    // the newest recycled slot
 
     // Tasks parked in blocking UNIX calls (io/fdwait.cpp): the idle loop
     // waits on their descriptors; while other tasks run, io_tmr polls them.
@@ -220,6 +234,11 @@ struct Kernel {
     struct Hook { void (*fn)(void*); void* arg; };
     Hook hooks[32];
     int nhooks = 0;
+
+    // Tests only: called at every switch with the task switched to
+    // (nullptr: the idle loop) and the time; the differential scheduler
+    // test records the timeline with it.
+    void (*trace_switch)(const Tcb* next, std::uint64_t now) = nullptr;
 
     // Statistics. remote_parks: remote waits that parked their task (a
     // wait granted while it spun is not one).
@@ -267,6 +286,9 @@ void schedule_locked();
 void reschedule_locked();
 // True when the current task should give up the CPU now.
 bool must_switch_locked(std::uint64_t now);
+// The decision at an event (timers fired) while a task runs: charges it,
+// returns must_switch_locked, else arms its quantum's end if needed.
+bool decide_at_event_locked(std::uint64_t now);
 // Block the current task (state already set); returns its wait_result.
 int block_current_locked();
 // Work owed to the current task in its own context: user signals, deadline
@@ -306,6 +328,8 @@ void io_busy_arm_locked(std::uint64_t now);
 
 // ---- tasks (task/*.cpp)
 Tcb* tcb_lookup(chm_tid_t id);
+// The same, and a task that ended whose slot was not taken again (status).
+Tcb* tcb_lookup_ended_too(chm_tid_t id);
 inline chm_tid_t tid_of(const Tcb* t) { return chm_tid_t(t->index | (std::uint32_t(t->gen) << 16)); }
 // Is `s` the scheduler view of a live TCB? O(1); never dereferences a
 // pointer that is not inside the TCB array.

@@ -23,8 +23,8 @@ void periodic_body(void* p) {
     const Job* j = static_cast<const Job*>(p);
     for (int c = 0; c < j->cycles; ++c) {
         for (uint64_t used = 0; used < j->wcet; used += kMs / 2) {
-            g_trace += j->name[0];
             chm_time_consume(kMs / 2);
+            g_trace += j->name[0];  // once the slot ran (see long_runner)
         }
         if (c + 1 < j->cycles) {
             ASSERT_EQ(chm_task_wait_period(), 0);
@@ -135,13 +135,17 @@ TEST_P(EverySched, UnderloadedHarmonicSetMeetsEveryDeadline) {
 }
 
 void urgent_once(void*) {
-    g_trace += 'U';
     chm_time_consume(kMs / 2);
+    g_trace += 'U';
 }
+// A slot is noted once it ran: at the instant a task's work ends it runs on
+// to its next kernel call before what else happens then is acted on
+// (sched.h), so a note taken before the next slot would come before a
+// preemption at that instant.
 void long_runner(void*) {
     for (int i = 0; i < 6; ++i) {
-        g_trace += 'L';
         chm_time_consume(kMs / 2);
+        g_trace += 'L';
     }
 }
 

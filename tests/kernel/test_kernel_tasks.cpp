@@ -51,8 +51,11 @@ TEST_F(Tasks, YieldRotatesAmongEquals) {
 
 void worker_1ms_x5(void* name) {
     for (int i = 0; i < 5; ++i) {
-        note(static_cast<const char*>(name));
+        // Noted once it ran (stamped with its start): a task's code runs on
+        // to its next kernel call before the events of the instant its
+        // work ended are acted on.
         chm_time_consume(kMs);
+        g_trace.push_back({chm_time_now() - kMs, static_cast<const char*>(name)});
     }
 }
 
@@ -133,12 +136,81 @@ void finder(void*) {
     EXPECT_LT(st.stack_high_water, st.stack_size);
 }
 
+void nop_task(void*) {}
+
+// Spawns tasks (left ready) until `id` no longer reads; returns the last one.
+chm_tid_t spawn_until_stale(chm_tid_t id) {
+    chm_task_status_t st;
+    chm_tid_t last = CHM_TID_NONE;
+    for (int n = 0; n < 1000 && chm_task_status(id, &st) == 0; ++n) {
+        chm_task_attr_t a;
+        chm_task_attr_init(&a);
+        a.name = "filler";
+        EXPECT_EQ(chm_task_spawn(&last, nop_task, nullptr, &a), 0);
+    }
+    EXPECT_NE(chm_task_status(id, &st), 0);
+    return last;
+}
+
 TEST_F(Tasks, FindByNameAndStatusSnapshot) {
     start(CHM_SCHED_MUF);
     chm_tid_t id = spawn(finder, nullptr, "finder");
     ASSERT_EQ(chm_kernel_run(), 0);
     chm_task_status_t st;
-    EXPECT_EQ(chm_task_status(id, &st), -ESRCH) << "ended tasks' ids go stale";
+    ASSERT_EQ(chm_task_status(id, &st), 0) << "an ended task's final counters stay readable";
+    EXPECT_EQ(st.state, CHM_TASK_ENDED);
+    EXPECT_STREQ(st.name, "finder");
+    EXPECT_EQ(st.cpu_ns, 3 * kMs);
+    EXPECT_GE(st.stack_high_water, 4096u);
+    // Until its slot is taken by a new task: then the id is stale.
+    const chm_tid_t last = spawn_until_stale(id);
+    EXPECT_EQ(last & 0xffff, id & 0xffff) << "stale exactly when its slot was reused";
+}
+
+// Slots are reused oldest-freed first: of two ended tasks, the one that
+// ended last stays readable longer.
+TEST_F(Tasks, EndedTasksStayReadableUntilTheirSlotIsReused) {
+    start(CHM_SCHED_MUF);
+    chm_tid_t a = spawn(nop_task, nullptr, "a"), b = spawn(nop_task, nullptr, "b");
+    ASSERT_EQ(chm_kernel_run(), 0);  // a ends first
+    spawn_until_stale(a);
+    chm_task_status_t st;
+    ASSERT_EQ(chm_task_status(b, &st), 0);
+    EXPECT_STREQ(st.name, "b");
+    EXPECT_EQ(st.state, CHM_TASK_ENDED);
+}
+
+// A task locked into the CPU runs late through two deadlines; its handler
+// runs once, when it unlocks, and is told both.
+std::vector<chm_deadline_info_t> g_dl_calls;
+chm_deadline_action record_miss(const chm_deadline_info_t* info, void*) {
+    g_dl_calls.push_back(*info);
+    return CHM_DL_CONTINUE;
+}
+void late_while_locked(void*) {
+    chm_task_lock();
+    chm_time_consume(25 * kMs);  // cycle 0 (deadline 10 ms) ends at 25 ms
+    EXPECT_EQ(chm_task_wait_period(), 0);  // cycle 1 is due (10 ms), its deadline passed (20 ms)
+    chm_time_consume(kMs);
+    EXPECT_TRUE(g_dl_calls.empty()) << "locked: nothing runs on its behalf yet";
+    chm_task_unlock();
+}
+
+TEST_F(Tasks, ADeadlineHandlerIsToldHowManyDeadlinesPassedBeforeItRan) {
+    start(CHM_SCHED_MUF);
+    g_dl_calls.clear();
+    chm_task_attr_t a;
+    chm_task_attr_init(&a);
+    a.name = "late";
+    a.period_ns = 10 * kMs;
+    a.on_deadline = record_miss;
+    ASSERT_EQ(chm_task_spawn(nullptr, late_while_locked, nullptr, &a), 0);
+    ASSERT_EQ(chm_kernel_run(), 0);
+    ASSERT_EQ(g_dl_calls.size(), 1u);
+    EXPECT_EQ(g_dl_calls[0].unhandled, 2u);
+    EXPECT_EQ(g_dl_calls[0].misses, 2u);
+    EXPECT_EQ(g_dl_calls[0].cycle, 1u) << "the latest miss";
+    EXPECT_EQ(g_dl_calls[0].deadline_ns, 20 * kMs);
 }
 
 void nop(void*) {}

@@ -41,6 +41,35 @@ void unready_locked(Tcb* t) {
     }
 }
 
+// The policy's order moves while a task runs (laxity under MLF and MUF; a
+// user policy may do anything): a decision at a quantum's end can change
+// who runs even without an equal waiting.
+inline bool order_moves_with_time() {
+    return g_k.policy == CHM_SCHED_MLF || g_k.policy == CHM_SCHED_MUF || g_k.policy == CHM_SCHED_USER;
+}
+
+// The running task's quanta end at slice_start + k * quantum (sched.h).
+bool quantum_expired_locked(std::uint64_t now) {
+    const std::uint64_t q = g_k.cfg.quantum_ns;
+    if (!q || now <= g_k.slice_start) return false;
+    return (g_k.quantum_due && now >= g_k.quantum_due) || (now - g_k.slice_start) % q == 0;
+}
+
+// Arm the end of `t`'s current quantum, but only when a decision there can
+// change anything (tickless): an equal task waits (round robin), or the
+// order moves with time and any task waits.
+void quantum_arm_locked(Tcb* t, std::uint64_t now) {
+    const std::uint64_t q = g_k.cfg.quantum_ns;
+    if (!q || g_k.quantum_due > now) return;
+    g_k.quantum_due = 0;
+    Tcb* head = sched_pick_locked(now);
+    if (!head || (!order_moves_with_time() && sched_before_locked(t, head, now))) return;
+    std::uint64_t due = g_k.slice_start + q;
+    if (now >= due) due += (now - due) / q * q + q;  // the first end after now
+    g_k.quantum_due = due;
+    timer_program_locked(now);
+}
+
 bool must_switch_locked(std::uint64_t now) {
     Tcb* cur = g_k.current;
     if (!cur) return false;
@@ -51,21 +80,19 @@ bool must_switch_locked(std::uint64_t now) {
     Tcb* head = sched_pick_locked(now);
     if (!head) return false;
     if (sched_before_locked(head, cur, now)) return true;
-    // Round robin among equals when the quantum has run out.
-    return g_k.quantum_due && now >= g_k.quantum_due && !sched_before_locked(cur, head, now);
+    // Round robin among equals at the end of a quantum.
+    return quantum_expired_locked(now) && !sched_before_locked(cur, head, now);
+}
+
+bool decide_at_event_locked(std::uint64_t now) {
+    if (!g_k.current) return false;
+    charge_current_locked(now);  // the running task's laxity as of now
+    if (must_switch_locked(now)) return true;
+    quantum_arm_locked(g_k.current, now);
+    return false;
 }
 
 namespace {
-
-// Round robin: a quantum runs only while an equal task waits for the CPU, so
-// a task alone at its urgency is never interrupted for nothing (tickless).
-void arm_quantum_if_shared_locked(Tcb* t, std::uint64_t now) {
-    if (!g_k.cfg.quantum_ns || g_k.quantum_due) return;
-    Tcb* head = sched_pick_locked(now);
-    if (!head || sched_before_locked(t, head, now)) return;
-    g_k.quantum_due = now + g_k.cfg.quantum_ns;
-    timer_program_locked(now);
-}
 
 // Switch from the current context (a task or the kernel's own) to `next`
 // (nullptr = the kernel's idle loop). Returns in the original context when
@@ -80,9 +107,11 @@ __attribute__((noinline)) void switch_to_locked(Tcb* next, std::uint64_t now) {
     g_k.current = next;
     if (port::g_db_publishes) publish_running_locked();
     if (g_k.cfg.cpu_accounting) g_k.switched_in_at = now;
+    g_k.slice_start = now;
     g_k.quantum_due = 0;
-    if (next && g_k.cfg.quantum_ns) arm_quantum_if_shared_locked(next, now);
+    if (next && g_k.cfg.quantum_ns) quantum_arm_locked(next, now);
     ++g_k.switches;
+    if (g_k.trace_switch) [[unlikely]] g_k.trace_switch(next, now);
     port::context_switch_same_site(from, to);  // the kernel's only switch site
     // Back in `prev`'s context.
     if (Tcb* z = g_k.zombie) [[unlikely]] {  // its stack is no longer in use
@@ -127,6 +156,7 @@ inline std::uint64_t schedule_now_locked() {
 void schedule_locked() {
     // A priority changed without a switch (set, lent, handler) is published too.
     if (port::g_db_publishes) publish_running_locked();
+    g_k.decision_owed = false;
     const std::uint64_t now = schedule_now_locked();
     Tcb* cur = g_k.current;
     const bool cur_runs = cur && cur->state == TaskState::Running;
@@ -138,19 +168,21 @@ void schedule_locked() {
             requeue_and_switch_locked(cur, head, true, now);  // preempted
             return;
         }
-        if (sched_before_locked(cur, head, now)) return;
-        if (!(g_k.quantum_due && now >= g_k.quantum_due)) {
-            arm_quantum_if_shared_locked(cur, now);
+        if (!sched_before_locked(cur, head, now) && quantum_expired_locked(now)) {
+            requeue_and_switch_locked(cur, head, false, now);  // round robin
             return;
         }
-        requeue_and_switch_locked(cur, head, false, now);  // round robin
+        quantum_arm_locked(cur, now);
         return;
     }
     if (head) {
         unready_locked(head);
         head->state = TaskState::Running;
     }
-    if (head == cur) return;
+    if (head == cur) {  // it took the CPU straight back (a late release): same slice
+        if (cur) quantum_arm_locked(cur, now);
+        return;
+    }
     switch_to_locked(head, now);
 }
 
@@ -245,7 +277,8 @@ void deliver_pending_slow_locked() {
             cur->miss_pending = false;
             chm_deadline_info_t info{chm_tid_t(cur->index | (std::uint32_t(cur->gen) << 16)),
                                      cur->missed_cycle, cur->missed_deadline, now_locked(),
-                                     cur->misses};
+                                     cur->misses, cur->misses_unhandled};
+            cur->misses_unhandled = 0;
             chm_deadline_action act = CHM_DL_CONTINUE;
             if (cur->on_deadline) {
                 const int own_prio = cur->s.priority;
@@ -316,21 +349,21 @@ void pending_tick(std::uint32_t why) {
         timers_run_locked(now);
         timer_program_locked(now);
     }
-    if (g_k.current && must_switch_locked(now)) {
-        reschedule_locked();
-    }
+    if (decide_at_event_locked(now)) reschedule_locked();
 }
 
 // The timer signal, on the alternate stack, mask held by the port.
 bool tick_from_signal(std::uint64_t now) {
     ++g_k.ticks;
     g_k.now_cache = now;
-    if (!g_k.cfg.cpu_accounting) charge_current_locked(now);  // statistical
     timer_fired_locked(now);
     irq_dispatch_locked();
     timers_run_locked(now);
+    // Charged here in both accounting modes (statistical without per-switch
+    // accounting): MLF's and MUF's laxity of the running task needs it.
+    const bool sw = decide_at_event_locked(now);
     timer_program_locked(now);
-    return g_k.current && must_switch_locked(now);
+    return sw;
 }
 
 }  // namespace

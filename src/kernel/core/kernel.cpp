@@ -221,6 +221,7 @@ void chm_kernel_fini(void) {
     }
     g_k.tcb_hw = hw;
     g_k.free_slot = hw ? 0 : -1;
+    g_k.free_tail = hw ? std::int32_t(hw - 1) : -1;
 }
 
 }  // extern "C"

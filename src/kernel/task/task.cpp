@@ -29,6 +29,7 @@ Tcb* slot_take_locked() {
     if (g_k.free_slot >= 0) {
         i = std::uint32_t(g_k.free_slot);
         g_k.free_slot = g_k.tcbs[i].next_free;
+        if (g_k.free_slot < 0) g_k.free_tail = -1;
     } else if (g_k.tcb_hw < kMaxTasks) {
         i = g_k.tcb_hw++;
     } else {
@@ -46,10 +47,16 @@ Tcb* slot_take_locked() {
     return t;
 }
 
+// Slots are reused oldest-freed first: an ended task's final status stays
+// readable (chm_task_status) for as long as possible, and a slot's
+// generation, hence a stale id, comes round as slowly as possible.
 void slot_give_back_locked(Tcb* t) {
     t->used = false;
-    t->next_free = g_k.free_slot;
-    g_k.free_slot = std::int32_t(t->index);
+    t->next_free = -1;
+    const std::int32_t i = std::int32_t(t->index);
+    if (g_k.free_tail >= 0) g_k.tcbs[g_k.free_tail].next_free = i;
+    else g_k.free_slot = i;
+    g_k.free_tail = i;
 }
 
 int check_attr(const chm_task_attr_t& a, std::size_t* stack) {
@@ -74,6 +81,17 @@ Tcb* tcb_lookup(chm_tid_t id) {
     Tcb* t = &g_k.tcbs[i];
     if (!t->used || t->gen != (std::uint32_t(id) >> 16) || t->state == TaskState::Ended) return nullptr;
     return t;
+}
+
+// A task that ended keeps its TCB (state Ended, generation) until the slot
+// is taken again: its final counters stay readable.
+Tcb* tcb_lookup_ended_too(chm_tid_t id) {
+    if (id < 0 || !g_k.tcbs) return nullptr;
+    const std::uint32_t i = std::uint32_t(id) & 0xffff;
+    if (i >= g_k.tcb_hw) return nullptr;
+    Tcb* t = &g_k.tcbs[i];
+    if (t->gen != (std::uint32_t(id) >> 16)) return nullptr;
+    return t->used || t->state == TaskState::Ended ? t : nullptr;
 }
 
 bool tcb_view_valid(const chm_sched_task_t* s) {
@@ -102,6 +120,9 @@ void task_start(void* p) {
 }
 
 void release_cycle_locked(Tcb* t, std::uint64_t release) {
+    // Counted here, not when the task returns from its wait: a deadline
+    // that passes before it runs again names the cycle that missed.
+    t->cycle = t->releases++;
     t->s.release_ns = release;
     t->s.abs_deadline_ns = release + t->s.deadline_ns;
     t->s.cycle_cpu_ns = 0;
@@ -115,6 +136,7 @@ void release_cycle_locked(Tcb* t, std::uint64_t release) {
 
 void deadline_missed_locked(Tcb* t, std::uint64_t now) {
     ++t->misses;
+    ++t->misses_unhandled;
     t->missed_cycle = t->cycle;
     t->missed_deadline = t->s.abs_deadline_ns;
     if (now - t->s.abs_deadline_ns > t->worst_lateness) t->worst_lateness = now - t->s.abs_deadline_ns;
@@ -133,7 +155,8 @@ void task_end_locked(Tcb* t) {
 }
 
 void task_free_stack(Tcb* t) {
-    stacks_release(t->stack_lo, t->stack_size, stack_dirty_estimate(t));
+    t->final_high_water = stack_dirty_estimate(t);
+    stacks_release(t->stack_lo, t->stack_size, t->final_high_water);
     t->stack_lo = nullptr;
     slot_give_back_locked(t);
 }
@@ -194,7 +217,6 @@ int chm_task_spawn(chm_tid_t* out, void (*entry)(void*), void* arg, const chm_ta
     const std::uint64_t now = now_locked();
     if (a.period_ns) {
         const std::uint64_t first = a.start_ns ? a.start_ns : now;
-        t->cycle = 0;
         if (first > now) {
             t->state = TaskState::WaitPeriod;
             t->tmr.kind = TimerKind::Release;
@@ -317,7 +339,7 @@ int chm_task_count(void) { return int(g_k.alive); }
 int chm_task_status(chm_tid_t id, chm_task_status_t* out) {
     if (!out) return raise_or_return(-EINVAL, "chm_task_status");
     IrqGuard guard;
-    Tcb* t = tcb_lookup(id);
+    Tcb* t = tcb_lookup_ended_too(id);
     if (!t) return raise_or_return(-ESRCH, "chm_task_status");
     if (t == g_k.current) charge_current_locked(now_locked());
     *out = chm_task_status_t{};
@@ -344,7 +366,7 @@ int chm_task_status(chm_tid_t id, chm_task_status_t* out) {
     out->worst_lateness_ns = t->worst_lateness;
     out->worst_cycle_cpu_ns = t->worst_cycle_cpu;
     out->stack_size = t->stack_size;
-    out->stack_high_water = stack_high_water(t);
+    out->stack_high_water = t->stack_lo ? stack_high_water(t) : t->final_high_water;
     return 0;
 }
 

@@ -135,6 +135,11 @@ extern "C" void chm_time_consume(uint64_t ns) {
         return;
     }
     IrqGuard guard;
+    // The decision of the instant the caller's last work ended (below).
+    if (g_k.decision_owed) {
+        g_k.decision_owed = false;
+        if (decide_at_event_locked(g_k.vnow)) reschedule_locked();
+    }
     std::uint64_t left = ns;
     while (left) {
         const std::uint64_t due = next_due_locked();
@@ -145,11 +150,15 @@ extern "C" void chm_time_consume(uint64_t ns) {
         left -= step;
         if (due && g_k.vnow >= due) {
             timers_run_locked(g_k.vnow);
-            if (must_switch_locked(g_k.vnow)) {
-                reschedule_locked();
-            } else if (g_k.quantum_due && g_k.vnow >= g_k.quantum_due) {
-                g_k.quantum_due = 0;  // expired with nobody to rotate with
+            if (!left) {
+                // The work ends at this very instant: it completes before
+                // what fired is acted on (a job done at its deadline is on
+                // time, whoever is released then). The caller's next call
+                // into the kernel decides.
+                g_k.decision_owed = true;
+                break;
             }
+            if (decide_at_event_locked(g_k.vnow)) reschedule_locked();
         }
     }
     charge_current_locked(g_k.vnow);

@@ -63,18 +63,20 @@ int chm_task_wait_period(void) {
     charge_current_locked(now);  // statistical when cpu_accounting is 0
     if (!cur->awaiting_release) complete_cycle_locked(cur, now);
     int r = 0;
-    if (cur->release_pending) {
-        // The release came while we were away (a signal interrupted the wait).
-        release_cycle_locked(cur, cur->pending_release);
-    } else {
-        const std::uint64_t next = cur->s.release_ns + cur->s.period_ns;
-        if (next <= now && !cur->abort_cycle) {
-            release_cycle_locked(cur, next);  // late: the next cycle is already due
-        } else {
-            r = sleep_current_locked(TaskState::WaitPeriod, next, TimerKind::Release);
+    const std::uint64_t next = cur->s.release_ns + cur->s.period_ns;
+    if (cur->release_pending || (next <= now && !cur->abort_cycle)) {
+        // The next cycle is already due (we ran late, or a signal took us
+        // from the wait when it came): a new job, which queues behind its
+        // equals like any release, and the scheduler decides who runs.
+        release_cycle_locked(cur, cur->release_pending ? cur->pending_release : next);
+        if (!cur->lock_nest) {
+            make_ready_locked(cur);
+            schedule_locked();
+            deliver_pending_locked();
         }
+    } else {
+        r = sleep_current_locked(TaskState::WaitPeriod, next, TimerKind::Release);
     }
-    if (r == 0) ++cur->cycle;
     if (cur->abort_cycle && r == 0) {
         // Restart the entry from the top, on this same stack: we are deep
         // below the frames context_init rewrites, and never return to them.
