@@ -10,6 +10,7 @@
 // is printed as a C++ initialiser to paste into kRegressions below.
 #include <cinttypes>
 #include <cstdio>
+#include <array>
 #include <cstdlib>
 #include <random>
 #include <sstream>
@@ -29,17 +30,52 @@ struct Case {
     std::vector<ref::Task> tasks;
 };
 
+// A case as the initialiser of kRegressions (times in units of kUnit).
 std::string describe(const Case& c) {
     static const char* names[] = {"CHM_SCHED_MUF", "CHM_SCHED_RM", "CHM_SCHED_EDF", "CHM_SCHED_MLF",
                                   "CHM_SCHED_FIXED"};
     std::ostringstream o;
-    o << "{" << names[c.policy] << ", " << c.quantum << "u, {\n";
+    o << "{\"\", " << names[c.policy] << ", " << c.quantum / kUnit << ", {\n";
     for (const auto& t : c.tasks)
-        o << "    {" << t.period << "u, " << t.deadline << "u, " << t.wcet << "u, " << t.work << "u, "
-          << t.phase << "u, " << t.priority << ", " << (t.critical ? "true" : "false") << ", " << t.jobs
-          << "},\n";
-    o << "}}";
+        o << "    {" << t.period / kUnit << ", " << t.deadline / kUnit << ", " << t.wcet / kUnit << ", "
+          << t.work / kUnit << ", " << t.phase / kUnit << ", " << t.priority << ", "
+          << (t.critical ? "true" : "false") << ", " << t.jobs << "},\n";
+    o << "}},";
     return o.str();
+}
+
+// Sets that once differed, in units of kUnit: period, deadline, wcet,
+// work, phase, priority, critical, jobs.
+struct Regression {
+    const char* what;
+    chm_sched_policy policy;
+    std::uint64_t quantum;
+    std::vector<std::array<std::uint64_t, 8>> tasks;
+};
+const Regression kRegressions[] = {
+    // A's work ends at its deadline (4) as B, more urgent under RM, is
+    // released: A is on time. The kernel used to preempt A inside its last
+    // chm_time_consume and count a miss when it got back to wait_period.
+    {"completes at its deadline as a release preempts", CHM_SCHED_RM, 0, {
+        {10, 4, 4, 4, 0, 0, false, 2},
+        {5, 5, 1, 1, 4, 0, false, 2},
+    }},
+    // The first set the differential test found (a late cycle kept the CPU).
+    {"random RM set 0 of seed 20261125", CHM_SCHED_RM, 31, {
+        {104, 95, 13, 13, 0, 1, false, 7},
+        {60, 48, 8, 8, 0, 2, false, 12},
+        {185, 166, 19, 19, 0, 2, false, 4},
+        {181, 114, 17, 17, 0, 0, false, 4},
+        {93, 52, 14, 14, 0, 2, false, 7},
+    }},
+};
+
+Case case_of(const Regression& r) {
+    Case c{r.policy, r.quantum * kUnit, {}};
+    for (const auto& v : r.tasks)
+        c.tasks.push_back(ref::Task{v[0] * kUnit, v[1] * kUnit, v[2] * kUnit, v[3] * kUnit, v[4] * kUnit,
+                                    int(v[5]), v[6] != 0, int(v[7])});
+    return c;
 }
 
 Case random_case(std::mt19937_64& rng, chm_sched_policy policy) {
@@ -234,7 +270,7 @@ TEST_P(SchedDiff, RandomSetsMatchTheReferenceWholeAndSliced) {
             if (d.empty()) continue;
             ++failures;
             ADD_FAILURE() << "set " << n << (sliced ? " (sliced)" : " (whole)") << " differs:\n"
-                          << d << "paste into kRegressions (u = " << kUnit << " ns):\n"
+                          << d << "paste into kRegressions:\n"
                           << describe(c);
             break;
         }
@@ -246,6 +282,20 @@ TEST_P(SchedDiff, RandomSetsMatchTheReferenceWholeAndSliced) {
     // many decisions.
     EXPECT_GT(g_totals.misses, sets);
     EXPECT_GT(g_totals.segments, 10 * sets);
+}
+
+TEST(SchedDiffRegressions, EachMatchesTheReference) {
+    for (const Regression& r : kRegressions)
+        for (bool sliced : {false, true}) {
+            const std::string d = check(case_of(r), sliced, 1);
+            EXPECT_EQ(d, "") << r.what << (sliced ? " (sliced)" : " (whole)");
+        }
+}
+
+TEST(SchedDiffRegressions, AJobDoneAtItsDeadlineIsOnTimeWhoeverIsReleasedThen) {
+    const ref::Result r = ref::simulate(CHM_SCHED_RM, 0, case_of(kRegressions[0]).tasks);
+    EXPECT_EQ(r.misses[0], 0u);
+    EXPECT_EQ(r.completions[0].front(), 4 * kUnit);
 }
 
 INSTANTIATE_TEST_SUITE_P(Policies, SchedDiff,
