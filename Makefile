@@ -45,10 +45,12 @@ demo-multi: build
 
 test: test-native test-m68k test-aarch64
 
-# The kill-at-a-named-point tests with 2000 kills per point, not 100.
+# The kill-at-a-named-point tests with 2000 kills per point, not 100, and
+# the differential scheduler test with 20,000 sets per policy, random seed.
 stress: deps $(BUILD)/build.ninja
 	meson compile -C $(BUILD)
 	CHM_KILL_REPEATS=2000 $(MESON_TEST) -C $(BUILD) --timeout-multiplier 30 ipc_recovery ipc_msgq_robust
+	CHM_DIFF_SEED=0 CHM_DIFF_SETS=20000 $(BUILD)/tests/kernel/test_kernel_sched_diff --gtest_filter='Policies/*'
 
 test-native: deps deps-bench $(BUILD)/build.ninja
 	meson compile -C $(BUILD)

@@ -6,7 +6,61 @@
  * built-in table installed as a user scheduler behaves like the built-in.
  *
  * All operations run with the kernel's interrupt mask held: they must not
- * block, allocate, call the C library or the Chimera API. */
+ * block, allocate, call the C library or the Chimera API.
+ *
+ * The schedule, precisely (the built-in policies; a user policy is called
+ * at the same decision points):
+ *
+ * Order. Ready tasks are ordered by the policy's key, then by user
+ * priority (higher first), then first come:
+ *   RM    the period (aperiodic tasks after every periodic one);
+ *   EDF   the absolute deadline of the current cycle (none: last);
+ *   MLF   the laxity: absolute deadline - now - remaining estimated CPU,
+ *         where remaining = wcet - CPU used this cycle, at least 0;
+ *   MUF   the critical set first, then the laxity. The critical set is the
+ *         user-marked tasks, then the longest prefix of the other periodic
+ *         tasks in rate order (period, then spawn order) whose worst-case
+ *         utilisation, each wcet/period in parts per billion rounded down,
+ *         keeps the total <= 1; it changes when a task is spawned or ends;
+ *   FIXED the user priority only.
+ * "First come" is the instant a task last became ready: a release, a
+ * wake-up, a yield, the end of its quantum. A preempted task keeps its
+ * place. Timers due at one instant fire in task-index order (spawn order in
+ * a fresh kernel), so simultaneous releases arrive in that order.
+ *
+ * Decisions. The scheduler re-evaluates the keys (laxities included) and
+ * picks at every release, job completion (chm_task_wait_period), block,
+ * wake-up, deadline passing (deadline + 1 ns), spawn and end of a task, and
+ * at every end of the running task's quantum (the paper's time-driven
+ * reschedule). Quanta end at dispatch + k * quantum_ns while a task keeps
+ * the CPU; with quantum_ns 0 there are none. Between decisions the running
+ * task keeps the CPU, even under MLF when a waiting task's laxity falls
+ * below its own. The running task gives the CPU only to a task strictly
+ * before it; at the end of its quantum it also gives it to an equal one and
+ * goes behind its equals (round robin). A quantum's end is armed only when
+ * a decision there can change something (an equal waits; under MLF, MUF or
+ * a user policy, any task waits), so a lone task takes no ticks.
+ *
+ * One instant. When the running task's work ends at an instant at which
+ * other events fall due (a release, a deadline, a quantum's end), it runs
+ * on to its next kernel call before they are acted on: a job whose work
+ * ends at or before its deadline is on time, whoever is released then. (On
+ * the virtual clock this is exact; on the real clock the timer signal
+ * decides at the instant it lands.)
+ *
+ * Late cycles. A cycle that has not completed by its deadline is a miss,
+ * counted at deadline + 1 ns; it runs on (or its handler decides). When a
+ * late task calls chm_task_wait_period and its next release is already
+ * due, that cycle starts at once as a new arrival (behind its equals) and
+ * the scheduler decides who runs; releases stay on the grid
+ * start + k * period, none is skipped.
+ *
+ * CPU time: with cpu_accounting 1 (default) the running task is charged at
+ * every switch and every event, so MLF and MUF compare its laxity as of
+ * now; with 0, as of the last timer tick.
+ *
+ * tests/kernel/test_kernel_sched_diff.cpp checks all of this against an
+ * independent simulator written from this text. */
 #ifndef CHIMERA_SCHED_H
 #define CHIMERA_SCHED_H
 

@@ -60,7 +60,7 @@ const Regression kRegressions[] = {
         {10, 4, 4, 4, 0, 0, false, 2},
         {5, 5, 1, 1, 4, 0, false, 2},
     }},
-    // The first set the differential test found (a late cycle kept the CPU).
+    // The first set the differential test found against the old kernel.
     {"random RM set 0 of seed 20261125", CHM_SCHED_RM, 31, {
         {104, 95, 13, 13, 0, 1, false, 7},
         {60, 48, 8, 8, 0, 2, false, 12},
@@ -299,12 +299,14 @@ TEST(SchedDiffRegressions, AJobDoneAtItsDeadlineIsOnTimeWhoeverIsReleasedThen) {
 }
 
 INSTANTIATE_TEST_SUITE_P(Policies, SchedDiff,
-                         ::testing::Values(CHM_SCHED_RM, CHM_SCHED_EDF, CHM_SCHED_MLF, CHM_SCHED_MUF),
+                         ::testing::Values(CHM_SCHED_RM, CHM_SCHED_EDF, CHM_SCHED_MLF, CHM_SCHED_MUF,
+                                           CHM_SCHED_FIXED),
                          [](const auto& info) {
                              switch (info.param) {
                              case CHM_SCHED_RM: return std::string("RM");
                              case CHM_SCHED_EDF: return std::string("EDF");
                              case CHM_SCHED_MLF: return std::string("MLF");
+                             case CHM_SCHED_FIXED: return std::string("FIXED");
                              default: return std::string("MUF");
                              }
                          });
