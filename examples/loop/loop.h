@@ -53,7 +53,14 @@ typedef struct loop_stat {
     uint32_t lost;           /* answers that did not come in time */
     uint32_t unsent;         /* samples the controller's queue refused */
     float position, setpoint;
+    uint32_t safe;           /* 1: the sensor holds its safe output (no controller) */
+    int32_t controller;      /* RTPU the last answer came from; -1: none yet */
 } loop_stat_t;
+
+/* After this many cycles in a row without an answer the sensor stops
+ * applying forces (its safe output, zero force) until answers come back:
+ * a dead controller must not leave the plant under its last command. */
+#define LOOP_SAFE_AFTER 20
 
 /* Create the queue `name` (messages of `msg` bytes, `count` of them) in
  * `where`, or open it when an earlier run of this RTPU (restarted after a

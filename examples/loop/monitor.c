@@ -5,9 +5,13 @@
  * and p99, the sensor's release lateness, deadline misses, lost answers.
  *
  * usage: chimera-loop-monitor [--backplane PATH] [--seconds N]
+ * It also watches the RTPUs that were running when it started: one that
+ * dies or leaves is named at once, with how (died without leaving the
+ * backplane, i.e. killed or crashed, or left it).
  * Exit status 0 when the loop ran and every record arrived once, in order;
- * 1 when the loop stopped answering or records were lost; 2 bad usage or
- * no such system. */
+ * 1 when the loop broke (an RTPU died or left, a whole second without an
+ * answer, the sensor at its safe output), stopped or records were lost; 2
+ * bad usage or no such system. */
 #include <chimera/bp.h>
 #include <chimera/msgq.h>
 #include <errno.h>
@@ -56,6 +60,39 @@ static void add(window_t *w, const loop_stat_t *st) {
     }
 }
 
+/* The RTPUs running when the monitor started (their generation: a slot
+ * joined again by a new process is another RTPU), and which of them were
+ * already reported gone. */
+static chm_bp_status_t g_start, g_now;
+static int g_gone[CHM_BP_MAX_SLOTS];
+
+static int watched(uint32_t s) {
+    return g_start.slot[s].kind == CHM_BP_KIND_RTPU && g_start.slot[s].state == CHM_BP_RUNNING &&
+           (int)s != g_start.self;
+}
+
+/* Report each watched RTPU that is no longer the one that was running;
+ * the number newly reported. */
+static int report_gone(void) {
+    if (chm_bp_status(&g_now) != 0) return 0;
+    int n = 0;
+    for (uint32_t s = 0; s < g_start.slots; ++s) {
+        if (!watched(s) || g_gone[s]) continue;
+        const chm_bp_slot_info_t *was = &g_start.slot[s], *is = &g_now.slot[s];
+        if (is->state == CHM_BP_RUNNING && is->generation == was->generation) continue;
+        const char *how;
+        if (is->generation != was->generation) how = "was replaced by a new process";
+        else if (is->state == CHM_BP_DEAD || is->state == CHM_BP_RECOVERING)
+            how = "died without leaving the backplane (killed or crashed); the backplane recovered it";
+        else how = "left the backplane (stopped)";
+        printf("chimera-loop-monitor: RTPU %u (%s, pid %d) %s\n", s, was->name, (int)was->pid, how);
+        g_gone[s] = 1;
+        ++n;
+    }
+    fflush(stdout);
+    return n;
+}
+
 static void usage(const char *why) {
     fprintf(stderr, "chimera-loop-monitor: %s\nusage: chimera-loop-monitor [--backplane PATH] [--seconds N]\n", why);
     exit(2);
@@ -93,6 +130,7 @@ int main(int argc, char **argv) {
                 r == -ENOENT ? "not created within 10 s" : chm_bp_last_error());
         return 2;
     }
+    chm_bp_status(&g_start);
     /* Records queued before we came are history: start from the newest. */
     loop_stat_t st, prev = {0};
     while (chm_msgq_try_receive(q, &st, sizeof st, NULL) == (int)sizeof st) prev = st;
@@ -100,7 +138,7 @@ int main(int argc, char **argv) {
 
     static window_t sec, all;
     uint64_t gaps = 0, first = 0;
-    int status = 0;
+    int status = 0, gone = 0, silent_seconds = 0, safe_seen = 0;
     printf("   t   sent/s  answered/s   one-way p50     p99   round trip p50     p99   lateness p99"
            "   misses  lost  position\n");
     const uint64_t start = now_ns();
@@ -127,11 +165,14 @@ int main(int argc, char **argv) {
             last = st;
         }
         const uint32_t misses = last.misses - prev.misses, lost = last.lost - prev.lost;
-        printf("%3d s %7zu %11zu %10.0f us %6.0f us %13.0f us %6.0f us %11.0f us %8u %5u %+9.3f\n", t, sec.records,
+        gone += report_gone();
+        if (sec.records && !sec.answered) ++silent_seconds;
+        if (last.safe) safe_seen = 1;
+        printf("%3d s %7zu %11zu %10.0f us %6.0f us %13.0f us %6.0f us %11.0f us %8u %5u %+9.3f%s\n", t, sec.records,
                sec.answered, quantile_us(sec.one_way, sec.answered, 0.5), quantile_us(sec.one_way, sec.answered, 0.99),
                quantile_us(sec.round_trip, sec.answered, 0.5), quantile_us(sec.round_trip, sec.answered, 0.99),
                quantile_us(sec.late, sec.records < WINDOW_MAX ? sec.records : WINDOW_MAX, 0.99), misses, lost,
-               last.position);
+               last.position, last.safe ? "  SAFE OUTPUT" : "");
         fflush(stdout);
         if (sec.records == 0) {
             fprintf(stderr, "chimera-loop-monitor: no record from the sensor in second %d: the loop stopped\n", t);
@@ -141,11 +182,21 @@ int main(int argc, char **argv) {
         prev = last;
     }
     size_t n = all.answered < WINDOW_MAX ? all.answered : WINDOW_MAX;
-    printf("summary: %zu cycles in %d s, %zu answered in time, %u answers lost, %u deadline misses; "
-           "round trip p50 %.0f us p99 %.0f us (first %zu answers)\n",
-           all.records, seconds, all.answered, prev.lost - base.lost, prev.misses - base.misses,
-           quantile_us(all.round_trip, n, 0.5),
+    gone += report_gone();
+    printf("summary: %zu cycles in %d s, %zu answered in time, %zu unanswered (%u answers lost, %u samples not "
+           "sent), %u deadline misses; round trip p50 %.0f us p99 %.0f us (first %zu answers)\n",
+           all.records, seconds, all.answered, all.records - all.answered, prev.lost - base.lost,
+           prev.unsent - base.unsent, prev.misses - base.misses, quantile_us(all.round_trip, n, 0.5),
            quantile_us(all.round_trip, n, 0.99), n);
+    /* A loop that broke is a failed run, however many records arrived. */
+    if (gone || silent_seconds || safe_seen) {
+        printf("the loop broke:");
+        if (gone) printf(" %d RTPU%s gone (above);", gone, gone == 1 ? "" : "s");
+        if (silent_seconds) printf(" %d second%s without any answer;", silent_seconds, silent_seconds == 1 ? "" : "s");
+        if (safe_seen) printf(" the sensor went to its safe output;");
+        printf("\n");
+        status = 1;
+    }
     if (gaps) {
         printf("records: %llu of the sensor's cycles never reached the monitor\n", (unsigned long long)gaps);
         status = 1;

@@ -13,7 +13,8 @@
 #include "loop.h"
 
 static chm_msgq_t *g_reply, *g_stats, *g_sense;
-static uint64_t g_sent, g_answered, g_lost, g_unsent, g_stats_dropped;
+static uint64_t g_sent, g_answered, g_lost, g_unsent, g_stats_dropped, g_safe_cycles;
+static int g_controller = -1; /* RTPU of the last answer */
 static volatile uint32_t g_misses;
 
 /* A late cycle runs on: the miss is counted and reported through
@@ -30,9 +31,29 @@ static int await_reply(uint64_t seq, uint64_t until_ns, loop_reply_t *out) {
     for (;;) {
         const uint64_t now = chm_time_now();
         if (now >= until_ns) return 0;
-        const int n = chm_msgq_receive_timed(g_reply, out, sizeof *out, NULL, (int64_t)(until_ns - now));
-        if (n == (int)sizeof *out && out->seq == seq) return 1;
+        chm_msgq_msg_info_t info;
+        const int n = chm_msgq_receive_timed(g_reply, out, sizeof *out, &info, (int64_t)(until_ns - now));
+        if (n == (int)sizeof *out && out->seq == seq) {
+            g_controller = info.sender;
+            return 1;
+        }
         if (n < 0 && n != -EINTR) return 0;
+    }
+}
+
+/* Why the controller went silent, for the line that says the sensor went
+ * to its safe output: its RTPU's state on the backplane. */
+static const char *controller_state(void) {
+    static chm_bp_status_t st; /* large: not on the task's stack */
+    if (g_controller < 0) return "never answered";
+    if (chm_bp_status(&st) != 0) return "state unknown";
+    switch (st.slot[g_controller].state) {
+    case CHM_BP_RUNNING: return "still running, not answering in time";
+    case CHM_BP_DEAD:
+    case CHM_BP_RECOVERING: return "died without leaving the backplane (killed or crashed)";
+    case CHM_BP_FREE:
+    case CHM_BP_LEAVING: return "left the backplane (stopped)";
+    default: return "joining";
     }
 }
 
@@ -40,6 +61,8 @@ static void sensor(void *arg) {
     (void)arg;
     const double dt = LOOP_PERIOD_NS / 1e9;
     double pos = 0.0, vel = 0.0;
+    unsigned silent = 0; /* cycles in a row without an answer */
+    int safe = 0;        /* 1: at the safe output */
     for (uint64_t seq = 1;; ++seq) {
         const uint64_t release = chm_task_cycle_release();
         const uint64_t t0 = chm_time_now();
@@ -48,11 +71,13 @@ static void sensor(void *arg) {
         if (!g_sense && chm_msgq_open(LOOP_SENSE, &g_sense) != 0) g_sense = NULL;
         const loop_sample_t s = {seq, t0, (float)pos, (float)vel};
         double force = 0.0;
+        int answered = 0;
         if (g_sense && chm_msgq_try_send(g_sense, 1, 0, &s, sizeof s) == 0) {
             ++g_sent;
             loop_reply_t r;
             if (await_reply(seq, t0 + LOOP_REPLY_WAIT_NS, &r)) {
                 ++g_answered;
+                answered = 1;
                 force = r.force;
                 st.one_way_ns = (uint32_t)(r.received_ns - t0);
                 st.round_trip_ns = (uint32_t)(chm_time_now() - t0);
@@ -62,6 +87,25 @@ static void sensor(void *arg) {
         } else {
             ++g_unsent;
         }
+        /* Fail safe: after LOOP_SAFE_AFTER silent cycles the plant gets no
+         * force until the controller answers again. */
+        silent = answered ? 0 : silent + 1;
+        if (answered && safe) {
+            safe = 0;
+            printf("sensor: cycle %llu: the controller on RTPU %d answers again: loop closed\n",
+                   (unsigned long long)seq, g_controller);
+        } else if (!safe && silent >= LOOP_SAFE_AFTER) {
+            safe = 1;
+            printf("sensor: cycle %llu: no answer for %u cycles, controller RTPU %d %s: "
+                   "safe output (force 0)\n",
+                   (unsigned long long)seq, silent, g_controller, controller_state());
+        }
+        if (safe) {
+            force = 0.0;
+            ++g_safe_cycles;
+        }
+        st.safe = (uint32_t)safe;
+        st.controller = g_controller;
         vel += force * dt; /* the plant: a unit mass pushed by the force */
         pos += vel * dt;
         st.misses = g_misses;
@@ -81,10 +125,10 @@ static void on_shutdown(void *arg) {
     chm_task_status_t ts;
     if (chm_task_find("sensor", &me) == 0 && chm_task_status(me, &ts) == 0)
         printf("sensor: shutdown hook: %llu cycles, %llu samples sent, %llu answered, %llu answers lost, "
-               "%llu not sent, %llu deadline misses, %llu stats records dropped\n",
+               "%llu not sent, %llu deadline misses, %llu stats records dropped, %llu cycles at the safe output\n",
                (unsigned long long)ts.cycles, (unsigned long long)g_sent, (unsigned long long)g_answered,
                (unsigned long long)g_lost, (unsigned long long)g_unsent, (unsigned long long)ts.misses,
-               (unsigned long long)g_stats_dropped);
+               (unsigned long long)g_stats_dropped, (unsigned long long)g_safe_cycles);
     chm_msgq_destroy(LOOP_REPLY);
     chm_msgq_destroy(LOOP_STATS);
 }

@@ -131,6 +131,18 @@ int cmd_status(const Options& o) {
         if (is_rtpu(i)) ++rtpus;
     }
     if (rtpus == 0) std::printf("no RTPU running\n");
+    // A dead RTPU is the one thing on this page that needs a person: say
+    // which it was and how it ended, not just a state word in the table.
+    for (std::uint32_t s = 0; s < st.slots; ++s) {
+        const chm_bp_slot_info_t& i = st.slot[s];
+        if (i.kind != CHM_BP_KIND_RTPU) continue;
+        if (i.state == CHM_BP_DEAD)
+            std::printf("RTPU %u (%s) died: its process ended without leaving the backplane (killed or crashed); "
+                        "the backplane recovered its slot\n", s, i.name);
+        else if (i.state == CHM_BP_RECOVERING)
+            std::printf("RTPU %u (%s) died: its process ended without leaving the backplane; recovery in progress\n",
+                        s, i.name);
+    }
     for (std::uint32_t s = 0; s < st.slots; ++s) {
         const chm_bp_slot_info_t& i = st.slot[s];
         if (!is_rtpu(i) || i.state != CHM_BP_RUNNING) continue;

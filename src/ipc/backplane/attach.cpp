@@ -247,8 +247,11 @@ int chm_bp_leave(void) {
     RtpuEntry* e = a.rtpu(a.slot);
     std::uint32_t st = make_status(a.gen, SlotState::Running);
     e->status.compare_exchange_strong(st, make_status(a.gen, SlotState::Leaving), std::memory_order_acq_rel);
-    // Drop every attachment of this slot (ours and any left over).
+    // Withdraw the waiter records of tasks and threads still parked in a
+    // backplane wait (an RTPU stopped under them), then drop every
+    // attachment of this slot (ours and any left over).
     if (registry_lock(a, a.token) == 0) {
+        withdraw_departing(a, a.slot, a.gen, a.token);
         for (std::uint32_t i = 0; i < a.hdr()->geo.registry_capacity; ++i)
             if (a.entry(i)->attached.load(R) & (1u << a.slot)) registry_detach_locked(a, i, a.slot, a.token);
         registry_unlock(a);

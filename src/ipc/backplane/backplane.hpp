@@ -277,6 +277,16 @@ namespace chm::bp {
 // recovery. Safe to call from any number of processes at once.
 bool recover_slot(const View& v, std::uint32_t slot, std::uint32_t gen);
 
+// A graceful leave (chm_bp_leave, slot LEAVING, registry lock held by
+// `token` = make_token(slot, gen)): the departing process withdraws every
+// waiter record it still has, as its recovery would after a death. A task
+// parked in a backplane wait when its RTPU stopped never returns from it,
+// so nobody else would: each kind's callback drops the records (a grant
+// they hold is passed on or given back) and the express-mail requests are
+// given up. Locks the departing token still holds are adopted and repaired
+// like a dead holder's (lock_acquire_recovery).
+void withdraw_departing(const View& v, std::uint32_t slot, std::uint32_t gen, std::uint32_t token);
+
 // Is the holder of slot `slot` (as of status `st`) dead? Deep check.
 bool slot_holder_dead(const View& v, std::uint32_t slot, std::uint32_t st);
 

@@ -20,6 +20,7 @@
 #include <unistd.h>
 
 #include "ipc/backplane/backplane.hpp"
+#include "ipc/xmail/xmail.hpp"
 
 namespace chm::bp {
 
@@ -118,6 +119,19 @@ int register_recovery(std::uint32_t kind, RecoverFn fn) {
     if (kind == kKindNone || kind >= kKindMax) return -EINVAL;
     g_fns[kind].store(fn, std::memory_order_release);
     return 0;
+}
+
+void withdraw_departing(const View& v, std::uint32_t slot, std::uint32_t gen, std::uint32_t token) {
+    // The same callbacks as a recovery, with the departing token as the
+    // "recovery" token: each takes the object's lock under it (or adopts
+    // it, when a task of ours was stopped holding it) and drops the
+    // records named make_token(slot, gen) == token.
+    for (std::uint32_t i = 0; i < v.hdr()->geo.registry_capacity; ++i) {
+        RegistryEntry* e = v.entry(i);
+        if (static_cast<EntryState>(e->state.load(R)) == EntryState::Free) continue;
+        if (RecoverFn f = recovery_fn(e->kind.load(R))) f(v, i, slot, gen, token);
+    }
+    chm::xmail::withdraw(v, token);
 }
 
 bool recover_slot(const View& v, std::uint32_t slot, std::uint32_t gen) {

@@ -124,6 +124,28 @@ unsigned reclaim(const bp::View& v, bp::RingHeader* ring) {
     return freed;
 }
 
+unsigned withdraw(const bp::View& v, std::uint32_t token) {
+    unsigned n = 0;
+    for (std::uint32_t s = 0; s < v.slots(); ++s) {
+        bp::RingHeader* ring = v.ring(s);
+        if (ring->record_size < sizeof(Record)) continue;  // no express mail on this backplane
+        for (std::uint32_t i = 0; i < ring->capacity; ++i) {
+            Record* r = record_at(ring, i);
+            const std::uint32_t st = r->state.load(Acq);
+            const Phase p = phase_of(st);
+            if (p == kFree || p == kAbandoned || r->owner.load(R) != token) continue;
+            // abandon() leaves a reply that came in for the caller to read:
+            // nobody will read this one.
+            if (abandon(r, seq_of(st))) {
+                std::uint32_t replied = make_state(seq_of(st), kReplied);
+                r->state.compare_exchange_strong(replied, make_state(seq_of(st), kFree), Rel, R);
+            }
+            ++n;
+        }
+    }
+    return n;
+}
+
 int call(int rtpu, Kind kind, const void* req, std::uint32_t len, void* reply, std::uint32_t cap,
          std::uint32_t* reply_len, std::uint64_t timeout_ns) {
     t_error[0] = 0;

@@ -132,6 +132,14 @@ int call(int rtpu, Kind kind, const void* req, std::uint32_t len, void* reply, s
 // Any process; returns the number freed.
 unsigned reclaim(const bp::View& v, bp::RingHeader* ring);
 
+// A departing process (chm_bp_leave) gives up every request `token` still
+// has in any ring, as a sender that timed out would: not yet served ->
+// FREE, being served -> ABANDONED (that server frees it), a reply never
+// read -> FREE. Its tasks parked on a reply never run again, and the
+// record would otherwise hold a slot of the target's ring until that
+// server next wakes. Returns the number of records given up.
+unsigned withdraw(const bp::View& v, std::uint32_t token);
+
 // A record of a ring (index < capacity).
 inline Record* record_at(bp::RingHeader* ring, std::uint32_t i) {
     return reinterpret_cast<Record*>(reinterpret_cast<char*>(ring + 1) +
