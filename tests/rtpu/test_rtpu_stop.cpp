@@ -160,7 +160,9 @@ TEST_P(StopTest, ParkedWaiterWithdrawnAndNothingLost) {
     const std::string said = read_file(notes);
 
     // Nothing stale: the checker, and (express mail) the target's ring.
-    if (c.wait == Wait::Mail) EXPECT_EQ(records_of(2, token), 0) << "the departed sender's request is still in RTPU 2's ring";
+    if (c.wait == Wait::Mail) {
+        EXPECT_EQ(records_of(2, token), 0) << "the departed sender's request is still in RTPU 2's ring";
+    }
     const Outcome chk = run({CHIMERA_BPCHECK_BIN, bp_});
     EXPECT_EQ(chk.status, 0) << chk.out << chk.err;
 
