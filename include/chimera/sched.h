@@ -38,8 +38,10 @@
  * below its own. The running task gives the CPU only to a task strictly
  * before it; at the end of its quantum it also gives it to an equal one and
  * goes behind its equals (round robin). A quantum's end is armed only when
- * a decision there can change something (an equal waits; under MLF, MUF or
- * a user policy, any task waits), so a lone task takes no ticks.
+ * a decision there can change something (an equal waits; under MLF or MUF
+ * a waiting task with a deadline, in MUF's same class, whose laxity may
+ * fall below the running task's; under a user policy any waiting task), so
+ * a task alone at its urgency takes no ticks.
  *
  * One instant. When the running task's work ends at an instant at which
  * other events fall due (a release, a deadline, a quantum's end), it runs

@@ -41,11 +41,20 @@ void unready_locked(Tcb* t) {
     }
 }
 
-// The policy's order moves while a task runs (laxity under MLF and MUF; a
-// user policy may do anything): a decision at a quantum's end can change
-// who runs even without an equal waiting.
-inline bool order_moves_with_time() {
-    return g_k.policy == CHM_SCHED_MLF || g_k.policy == CHM_SCHED_MUF || g_k.policy == CHM_SCHED_USER;
+// Can `head`, waiting, come before the running task `t` without an event?
+// Only where the order moves with time: under MLF and MUF a waiting task's
+// laxity shrinks while the running one's stays, so a waiting task with a
+// deadline (in MUF's same class) may overtake; a user policy may do
+// anything. RM, EDF and FIXED keys only change at events.
+inline bool may_overtake_locked(const Tcb* head, const Tcb* t) {
+    switch (g_k.policy) {
+    case CHM_SCHED_MLF: return head->s.abs_deadline_ns != UINT64_MAX;
+    case CHM_SCHED_MUF:
+        return head->s.abs_deadline_ns != UINT64_MAX &&
+               ((head->s.flags ^ t->s.flags) & kInCriticalSet) == 0;
+    case CHM_SCHED_USER: return true;
+    default: return false;
+    }
 }
 
 // The running task's quanta end at slice_start + k * quantum (sched.h).
@@ -57,13 +66,13 @@ bool quantum_expired_locked(std::uint64_t now) {
 
 // Arm the end of `t`'s current quantum, but only when a decision there can
 // change anything (tickless): an equal task waits (round robin), or the
-// order moves with time and any task waits.
+// waiting head may overtake it as time passes.
 void quantum_arm_locked(Tcb* t, std::uint64_t now) {
     const std::uint64_t q = g_k.cfg.quantum_ns;
     if (!q || g_k.quantum_due > now) return;
     g_k.quantum_due = 0;
     Tcb* head = sched_pick_locked(now);
-    if (!head || (!order_moves_with_time() && sched_before_locked(t, head, now))) return;
+    if (!head || (!may_overtake_locked(head, t) && sched_before_locked(t, head, now))) return;
     std::uint64_t due = g_k.slice_start + q;
     if (now >= due) due += (now - due) / q * q + q;  // the first end after now
     g_k.quantum_due = due;
