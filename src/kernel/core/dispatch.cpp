@@ -58,10 +58,15 @@ inline bool may_overtake_locked(const Tcb* head, const Tcb* t) {
 }
 
 // The running task's quanta end at slice_start + k * quantum (sched.h).
+// An end that was not armed (nobody to rotate with until this instant)
+// still counts when an event lands on it exactly: on the virtual clock,
+// where instants coincide; on the real clock they do not, and the
+// division is skipped.
 bool quantum_expired_locked(std::uint64_t now) {
     const std::uint64_t q = g_k.cfg.quantum_ns;
     if (!q || now <= g_k.slice_start) return false;
-    return (g_k.quantum_due && now >= g_k.quantum_due) || (now - g_k.slice_start) % q == 0;
+    if (g_k.quantum_due && now >= g_k.quantum_due) return true;
+    return g_k.cfg.virtual_clock && (now - g_k.slice_start) % q == 0;
 }
 
 // Arm the end of `t`'s current quantum, but only when a decision there can
