@@ -98,6 +98,7 @@ TEST_F(RtpuTest, ChimeraBadInputGivesOneClearLine) {
     };
     const std::string text = dir_ + "/text.bp";
     { std::ofstream(text) << "not a backplane\n"; }
+    chmod(text.c_str(), 0600);  // ours alone: refused for what it holds, not for who may touch it
     const std::string notso = dir_ + "/text.so";
     { std::ofstream(notso) << "not an ELF file\n"; }
     const Case cases[] = {

@@ -221,8 +221,12 @@ int cmd_rm(const Options& o) {
     }
     chm::bp::View v;
     int fd = -1;
-    char why[320];
-    const int r = chm::bp::map_file(path, false, &v, &fd, why, sizeof why);
+    char why[768];
+    const int r = chm::bp::map_file(path, false, &v, &fd, why, sizeof why, true);
+    if (r == -EPERM || r == -ELOOP) {  // not ours to judge, whatever --force says
+        say("%s: %s", path, why);
+        return 1;
+    }
     if (r && !o.force) {
         say("%s is not a usable backplane file (%s): not removed (rm --force removes it anyway)", path, why);
         return 1;
