@@ -9,6 +9,7 @@
 #include <vector>
 
 #include <dirent.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "chimera/bp.h"
@@ -223,7 +224,9 @@ int cmd_rm(const Options& o) {
     int fd = -1;
     char why[768];
     const int r = chm::bp::map_file(path, false, &v, &fd, why, sizeof why, true);
-    if (r == -EPERM || r == -ELOOP) {  // not ours to judge, whatever --force says
+    struct stat ls{};
+    if (r == -EPERM || r == -ELOOP || (lstat(path, &ls) == 0 && !S_ISREG(ls.st_mode))) {
+        // Not ours to judge, whatever --force says.
         say("%s: %s", path, why);
         return 1;
     }
