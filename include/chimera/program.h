@@ -36,7 +36,9 @@ extern "C" {
  * Which files load: the path is resolved (every symbolic link followed) and
  * the resolved file is loaded only when no one but this process's user or
  * root could have changed it: the file and every directory above it are
- * owned by the user or root and writable by no one else, except that a
+ * owned by the user or root and writable by no one else (group write
+ * counts unless the group is the owner's personal group: same name, no
+ * other members, as with umask 002 on Debian or Fedora), except that a
  * sticky directory such as /tmp is fine above an entry the user or root
  * owns (others can neither rename nor delete it). When directories were
  * given with chm_program_trust_dir, the file must instead lie under one of

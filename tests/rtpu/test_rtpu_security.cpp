@@ -7,6 +7,7 @@
 // fix, and nothing is started. Runs as root here (as CI may): the files of
 // "another user" are chowned to nobody; without root those cases skip.
 #include <ftw.h>
+#include <grp.h>
 #include <pwd.h>
 #include <sys/stat.h>
 
@@ -336,11 +337,28 @@ TEST_F(SecurityTest, ProgramsLoadOnlyFromPathsNoOneElseCanChange) {
         {allowed + "/link.so", {"--programs", allowed}, {"is not under a program directory given at start"}},
         {allowed + "/probe.so", {"--programs", allowed}, {}},
     };
+    // umask 002 with a personal group (Debian, Fedora): group write by it is fine.
+    const group* mine = getgrgid(getegid());
+    if (mine && my_name() == mine->gr_name && (!mine->gr_mem || !mine->gr_mem[0])) {
+        const std::string umask002 = dir_ + "/umask002";
+        mkdir(umask002.c_str(), 0775);
+        chmod(umask002.c_str(), 0775);
+        copy_file(PROBE_SO, umask002 + "/probe.so", 0775);
+        cases.push_back({umask002 + "/probe.so", {}, {}});
+    }
     if (geteuid() == 0) {
         const std::string theirs = dir_ + "/theirs.so";
         copy_file(PROBE_SO, theirs, 0755);
         chown(theirs.c_str(), kNobody, kNobody);
         cases.push_back({theirs, {}, {theirs + " (owner nobody, mode 0755) belongs to another user: refused"}});
+        // Group-writable by a group that is not the owner's personal one.
+        const std::string shared = dir_ + "/shared";
+        mkdir(shared.c_str(), 0770);
+        chmod(shared.c_str(), 0770);
+        chown(shared.c_str(), 0, kNobody);
+        copy_file(PROBE_SO, shared + "/probe.so", 0755);
+        cases.push_back({shared + "/probe.so", {}, {"directory " + shared + " (owner root, mode 0770) can be written by "
+                                                    "others and is not sticky"}});
     } else {
         std::printf("(not root: the program of another owner is not tried; chown needs root)\n");
     }

@@ -10,6 +10,7 @@
 #include <cstdlib>
 #include <cstring>
 
+#include <grp.h>
 #include <pwd.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -31,6 +32,23 @@ void owner_name(uid_t uid, char* buf, std::size_t n) {
 }
 
 bool trusted_owner(uid_t uid) { return uid == ::geteuid() || uid == 0; }
+
+// Group write counts as "others" unless the group is the owner's personal
+// one (same name, primary group, no other members): with such groups
+// (Debian's and Fedora's default) users run with umask 002, and refusing
+// their builds would make the rule something people switch off.
+bool personal_group(gid_t gid, uid_t owner) {
+    const passwd* pw = ::getpwuid(owner);
+    if (!pw || pw->pw_gid != gid || !pw->pw_name) return false;
+    char name[256];
+    std::snprintf(name, sizeof name, "%s", pw->pw_name);  // getgrgid may reuse static storage
+    const group* gr = ::getgrgid(gid);
+    return gr && gr->gr_name && std::strcmp(gr->gr_name, name) == 0 && (!gr->gr_mem || !gr->gr_mem[0]);
+}
+
+bool writable_by_others(const struct stat& st) {
+    return (st.st_mode & 0002) || ((st.st_mode & 0020) && !personal_group(st.st_gid, st.st_uid));
+}
 
 // Under one of the --programs directories (both resolved: no link can
 // lead out of them).
@@ -80,7 +98,7 @@ int program_path_check(const char* path, char* real, std::size_t rlen, char* why
                       "there, or start the RTPU with --programs naming its directory", real, list);
         return -EACCES;
     }
-    if (!trusted_owner(st.st_uid) || (st.st_mode & 0022)) {
+    if (!trusted_owner(st.st_uid) || writable_by_others(st)) {
         std::snprintf(why, n, "%s (owner %s, mode 0%o) %s: refused; fix: %s, or start the RTPU with "
                       "--programs DIR naming a directory you trust", real, owner, unsigned(st.st_mode & 07777),
                       trusted_owner(st.st_uid) ? "can be changed by others" : "belongs to another user",
@@ -112,7 +130,7 @@ int program_path_check(const char* path, char* real, std::size_t rlen, char* why
                           "with --programs DIR", real, dir, owner, mode);
             return -EACCES;
         }
-        if ((mode & 0022) && !((mode & S_ISVTX) && trusted_owner(child_uid))) {
+        if (writable_by_others(ds) && !((mode & S_ISVTX) && trusted_owner(child_uid))) {
             std::snprintf(why, n, "%s: directory %s (owner %s, mode 0%o) can be written by others%s, who could "
                           "replace the program: refused; fix: chmod go-w %s, or start the RTPU with --programs DIR",
                           real, dir, owner, mode, (mode & S_ISVTX) ? "" : " and is not sticky", dir);
