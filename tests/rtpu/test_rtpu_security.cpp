@@ -406,3 +406,17 @@ TEST_F(SecurityTest, AnUntrustedSpawnRequestIsRefusedAndLoggedWithTheSlot) {
     ASSERT_EQ(chm_rtpu_spawn(1, (allowed + "/probe.so").c_str(), 2, argv, nullptr), 0) << chm_rtpu_last_error();
     EXPECT_TRUE(wait_text(probe_out, "main"));
 }
+
+TEST_F(SecurityTest, RmRemovesOnlyLogsOfItsOwnUser) {
+    if (geteuid() != 0) GTEST_SKIP() << "needs root to give a log to nobody (chown)";
+    make_backplane(bp_);
+    const std::string ours = bp_ + ".rtpu1.log", theirs = bp_ + ".rtpu7.log";
+    { std::ofstream(ours) << "ours\n"; }
+    { std::ofstream(theirs) << "theirs\n"; }
+    ASSERT_EQ(chown(theirs.c_str(), kNobody, kNobody), 0);
+    const Outcome r = chimera({"rm"});
+    EXPECT_EQ(r.status, 0) << r.err;
+    EXPECT_FALSE(exists(bp_));
+    EXPECT_FALSE(exists(ours));
+    EXPECT_TRUE(exists(theirs)) << "chimera rm removed another user's file";
+}

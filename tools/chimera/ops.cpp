@@ -256,7 +256,8 @@ int cmd_rm(const Options& o) {
         say("cannot remove %s: %s", path, std::strerror(errno));
         return 1;
     }
-    // Its RTPU logs (PATH.rtpuN.log).
+    // Its RTPU logs (PATH.rtpuN.log): only files of ours (in a shared
+    // directory such as /tmp, root could otherwise remove anyone's).
     const std::string p(path);
     const std::size_t cut = p.rfind('/');
     const std::string dir = cut == std::string::npos ? "." : p.substr(0, cut ? cut : 1);
@@ -265,8 +266,10 @@ int cmd_rm(const Options& o) {
     if (DIR* d = opendir(dir.c_str())) {
         while (dirent* e = readdir(d)) {
             const std::string n = e->d_name;
+            struct stat ls{};
             if (n.size() > base.size() + 4 && n.compare(0, base.size(), base) == 0 &&
-                n.compare(n.size() - 4, 4, ".log") == 0 && unlink((dir + "/" + n).c_str()) == 0)
+                n.compare(n.size() - 4, 4, ".log") == 0 && lstat((dir + "/" + n).c_str(), &ls) == 0 &&
+                ls.st_uid == geteuid() && unlink((dir + "/" + n).c_str()) == 0)
                 ++logs;
         }
         closedir(d);
