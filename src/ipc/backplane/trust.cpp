@@ -68,7 +68,7 @@ void dir_of(const char* path, char* buf, std::size_t n) {
 
 int describe_untrusted_path(const char* path, char* why, std::size_t n) {
     struct stat ls{};
-    if (::lstat(path, &ls) != 0) return 0;  // open() reports it
+    if (::lstat(path, &ls) != 0 || S_ISREG(ls.st_mode)) return 0;  // open() reports it / fstat decides
     char owner[96];
     user_name(ls.st_uid, owner, sizeof owner);
     if (S_ISLNK(ls.st_mode)) {
@@ -91,20 +91,23 @@ int describe_untrusted_path(const char* path, char* why, std::size_t n) {
 
 int check_trust(const struct stat& st, const Header* h, char* why, std::size_t n) {
     const uid_t me = ::geteuid();
+    const unsigned mode = unsigned(st.st_mode & 07777);
+    // Made for a group: the creator recorded it, and mode and group still say so.
+    const bool for_group = h && h->ext[kExtGroupFlag] == kGroupMarker && h->ext[kExtGroupId] == st.st_gid;
+    const bool shared = for_group && (mode & 0777) == 0660;
+    if (S_ISREG(st.st_mode) && !(mode & 0007) && (!(mode & 0020) || shared) &&
+        (st.st_uid == me || (shared && in_group(st.st_gid))))
+        return 0;  // the common case: no name lookups (NSS) on the way in
     char owner[96], self[96], grp[96];
     user_name(st.st_uid, owner, sizeof owner);
     user_name(me, self, sizeof self);
     group_name(st.st_gid, grp, sizeof grp);
-    const unsigned mode = unsigned(st.st_mode & 07777);
     if (!S_ISREG(st.st_mode)) {
         std::snprintf(why, n, "is %s (owner %s, mode 0%o), not a regular file: refused; fix: remove it "
                       "(after checking who made it) and let chimera start create the backplane",
                       kind_of(st.st_mode), owner, mode);
         return -EBADMSG;
     }
-    // Made for a group: the creator recorded it, and mode and group still say so.
-    const bool for_group = h && h->ext[kExtGroupFlag] == kGroupMarker && h->ext[kExtGroupId] == st.st_gid;
-    const bool shared = for_group && (mode & 0777) == 0660;
     if (mode & 0007) {
         std::snprintf(why, n, "owner %s, mode 0%o: others have access (anyone could %s it): refused; "
                       "fix: chmod o-rwx on it (or remove it and let chimera start create it)", owner, mode,
@@ -180,10 +183,11 @@ int chm_bp_check_dir(const char* dir, int create) {
         set_error("backplane directory %s: %s", dir, std::strerror(e));
         return -e;
     }
+    const unsigned mode = unsigned(st.st_mode & 07777);
+    if (S_ISDIR(st.st_mode) && st.st_uid == ::geteuid() && !(mode & 0077)) return 0;
     char owner[96], self[96];
     user_name(st.st_uid, owner, sizeof owner);
     user_name(::geteuid(), self, sizeof self);
-    const unsigned mode = unsigned(st.st_mode & 07777);
     if (S_ISLNK(st.st_mode)) {
         set_error("backplane directory %s: is a symbolic link (owner %s): refused, someone may have made it "
                   "to take your backplane; fix: remove it after checking who made it (rm %s)", dir, owner, dir);

@@ -81,8 +81,9 @@ int program_path_check(const char* path, char* real, std::size_t rlen, char* why
         std::snprintf(why, n, "%s: %s", real, std::strerror(e));
         return -e;
     }
-    char owner[64];
-    owner_name(st.st_uid, owner, sizeof owner);
+    char owner[64] = "";  // named only in a refusal (a lookup may read /etc/passwd)
+    if (!S_ISREG(st.st_mode) || !trusted_owner(st.st_uid) || writable_by_others(st))
+        owner_name(st.st_uid, owner, sizeof owner);
     if (!S_ISREG(st.st_mode)) {
         std::snprintf(why, n, "%s (owner %s, mode 0%o) is not a regular file: refused", real, owner,
                       unsigned(st.st_mode & 07777));
@@ -122,15 +123,16 @@ int program_path_check(const char* path, char* real, std::size_t rlen, char* why
             std::snprintf(why, n, "%s: directory %s: %s", real, dir, std::strerror(e));
             return -e;
         }
-        owner_name(ds.st_uid, owner, sizeof owner);
         const unsigned mode = unsigned(ds.st_mode & 07777);
+        const bool others = writable_by_others(ds);
+        if (!trusted_owner(ds.st_uid) || others) owner_name(ds.st_uid, owner, sizeof owner);
         if (!trusted_owner(ds.st_uid)) {
             std::snprintf(why, n, "%s: directory %s (owner %s, mode 0%o) belongs to another user, who could "
                           "replace the program: refused; fix: move it to a directory of yours, or start the RTPU "
                           "with --programs DIR", real, dir, owner, mode);
             return -EACCES;
         }
-        if (writable_by_others(ds) && !((mode & S_ISVTX) && trusted_owner(child_uid))) {
+        if (others && !((mode & S_ISVTX) && trusted_owner(child_uid))) {
             std::snprintf(why, n, "%s: directory %s (owner %s, mode 0%o) can be written by others%s, who could "
                           "replace the program: refused; fix: chmod go-w %s, or start the RTPU with --programs DIR",
                           real, dir, owner, mode, (mode & S_ISVTX) ? "" : " and is not sticky", dir);
