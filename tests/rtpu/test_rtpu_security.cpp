@@ -420,3 +420,51 @@ TEST_F(SecurityTest, RmRemovesOnlyLogsOfItsOwnUser) {
     EXPECT_FALSE(exists(ours));
     EXPECT_TRUE(exists(theirs)) << "chimera rm removed another user's file";
 }
+
+// A member of the group a file was made for may attach it though another
+// user owns it; the same user outside the group is refused.
+TEST_F(SecurityTest, AMemberOfTheGroupMayAttachAFileMadeForIt) {
+    if (geteuid() != 0) GTEST_SKIP() << "needs root to act as another user (setuid)";
+    const gid_t lab = kNobody;  // nogroup: a group root's files do not normally have
+    const std::string dir = dir_ + "/lab", bp = dir + "/lab.bp";
+    ASSERT_EQ(chmod(dir_.c_str(), 0711), 0);
+    ASSERT_EQ(mkdir(dir.c_str(), 0750), 0);
+    ASSERT_EQ(chown(dir.c_str(), 0, lab), 0);
+    make_backplane(bp, int(lab));
+    // As nobody, in the group or not: what chm_bp_check_file says (its
+    // error number as the exit status, its message through a pipe).
+    auto as_nobody = [&](const std::string& path, bool member, std::string* said) {
+        int pipefd[2];
+        if (pipe(pipefd) != 0) return -1000;
+        const pid_t p = fork();
+        if (p == 0) {
+            close(pipefd[0]);
+            const gid_t groups[] = {lab};
+            if (setgroups(member ? 1 : 0, groups) != 0 || setgid(member ? lab : kNobody - 1) != 0 ||
+                setuid(kNobody) != 0)
+                _exit(100);
+            const int r = chm_bp_check_file(path.c_str());
+            (void)!write(pipefd[1], chm_bp_last_error(), std::strlen(chm_bp_last_error()));
+            _exit(r == 0 ? 0 : -r);
+        }
+        close(pipefd[1]);
+        char buf[1024];
+        const ssize_t k = read(pipefd[0], buf, sizeof buf - 1);
+        close(pipefd[0]);
+        *said = k > 0 ? std::string(buf, std::size_t(k)) : "";
+        int st = 0;
+        waitpid(p, &st, 0);
+        return WIFEXITED(st) ? WEXITSTATUS(st) : -1;
+    };
+    std::string said;
+    EXPECT_EQ(as_nobody(bp, true, &said), 0) << said;
+    // Outside the group the kernel already refuses to open a 0660 file.
+    EXPECT_EQ(as_nobody(bp, false, &said), EACCES) << said;
+    // Made group-writable by hand (no record in the header): refused to members.
+    const std::string hand = dir + "/hand.bp";
+    make_backplane(hand);
+    ASSERT_EQ(chown(hand.c_str(), 0, lab), 0);
+    ASSERT_EQ(chmod(hand.c_str(), 0660), 0);
+    EXPECT_EQ(as_nobody(hand, true, &said), EPERM) << said;
+    EXPECT_TRUE(contains(said, "not created for that group")) << said;
+}
