@@ -32,7 +32,8 @@ $(BUILD)/build.ninja:
 build: deps $(BUILD)/build.ninja
 	meson compile -C $(BUILD)
 
-# A control loop closed across two RTPUs on the default /dev/shm backplane,
+# A control loop closed across two RTPUs on the default backplane (in the
+# user's own directory: `chimera path`),
 # its figures printed by a host process once a second for ~10 s; stops and
 # removes everything at the end or on Ctrl-C (examples/loop/demo.sh).
 demo: build

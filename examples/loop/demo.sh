@@ -1,6 +1,8 @@
 #!/bin/sh
 # `make demo`: a control loop closed across two RTPUs on the default
-# backplane (/dev/shm/chimera-$USER.bp, or $CHIMERA_BACKPLANE):
+# backplane ($CHIMERA_BACKPLANE, else `chimera path`: backplane.bp in a
+# directory of the user's alone, $XDG_RUNTIME_DIR/chimera or
+# /dev/shm/chimera-<uid>):
 #   RTPU 1  sensor.so      1 kHz: samples a simulated mass, sends the sample
 #                          (timestamped, 24 bytes) to the controller, waits
 #                          for the force it answers and applies it
@@ -22,7 +24,7 @@ LOOP=$BUILD/examples/loop
 MONITOR=$LOOP/chimera-loop-monitor
 . "$(dirname "$0")/../demo-lib.sh"
 demo_need "$CHIMERA" "$BUILD/tools/chimera-rtpu/chimera-rtpu" "$LOOP/sensor.so" "$LOOP/controller.so" "$MONITOR"
-BP=${CHIMERA_BACKPLANE:-/dev/shm/chimera-$(id -un).bp}
+BP=$("$CHIMERA" path) || exit 1
 RTPUS=2
 demo_begin
 

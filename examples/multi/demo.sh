@@ -1,6 +1,8 @@
 #!/bin/sh
 # `make demo-multi`: a live three-RTPU Chimera system on the default backplane
-# (/dev/shm/chimera-$USER.bp, or $CHIMERA_BACKPLANE), about 15 seconds:
+# ($CHIMERA_BACKPLANE, else `chimera path`: backplane.bp in a
+# directory of the user's alone, $XDG_RUNTIME_DIR/chimera or
+# /dev/shm/chimera-<uid>), about 15 seconds:
 #   RTPU 1  servo.so       1 kHz servo loop; state in global shared memory;
 #                          Vs the remote semaphore servo.tick every 100 ms
 #   RTPU 2  supervisor.so  10 Hz: watches the servo, moves its set point
@@ -20,7 +22,7 @@ MULTI=$BUILD/examples/multi
 . "$(dirname "$0")/../demo-lib.sh"
 demo_need "$CHIMERA" "$BUILD/tools/chimera-rtpu/chimera-rtpu" "$MULTI/servo.so" "$MULTI/supervisor.so" \
     "$MULTI/logger.so"
-BP=${CHIMERA_BACKPLANE:-/dev/shm/chimera-$(id -un).bp}
+BP=$("$CHIMERA" path) || exit 1
 RTPUS=3
 demo_begin
 

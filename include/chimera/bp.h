@@ -34,22 +34,63 @@ typedef struct chm_bp_config {
     uint32_t local_window_size; /* each RTPU's local memory, multiple of 4096 (default 256 KiB) */
     uint32_t common_size;       /* common memory, multiple of 4096, >= 4096 (default 8 MiB) */
     uint32_t registry_capacity; /* named objects (1..65536, default 256) */
-    uint32_t mode;              /* file permissions (default 0600) */
+    uint32_t mode;              /* file permissions (default 0600); group write and
+                                 * any bit for others are refused (-EINVAL) */
+    int32_t group;              /* -1 (default): the file is the creator's alone;
+                                 * a gid: the file is made mode 0660 with that
+                                 * group, and its members may attach */
 } chm_bp_config_t;
 
 /* Fill `cfg` with the defaults above. */
 void chm_bp_config_init(chm_bp_config_t* cfg);
 
 /* Write the default backplane path into buf: $CHIMERA_BACKPLANE if set,
- * else /dev/shm/chimera-<user>.bp. Errors: -EINVAL NULL buf;
- * -ENAMETOOLONG it does not fit in len bytes. */
+ * else <default directory>/backplane.bp (chm_bp_default_dir). Nothing is
+ * created. Errors: -EINVAL NULL buf; -ENAMETOOLONG it does not fit in len
+ * bytes. */
 int chm_bp_default_path(char* buf, size_t len);
+
+/* Write this user's directory for the default backplane and its logs into
+ * buf: $XDG_RUNTIME_DIR/chimera when XDG_RUNTIME_DIR names a directory
+ * owned by the caller, else /dev/shm/chimera-<uid>. Nothing is created.
+ * Errors: -EINVAL NULL buf; -ENAMETOOLONG. */
+int chm_bp_default_dir(char* buf, size_t len);
+
+/* Check that `dir` is a directory only the caller can use: not a symbolic
+ * link (lstat), owned by the caller's effective uid, no permission for the
+ * group or others. With `create` != 0 it is made first (mode 0700) when
+ * missing. chm_bp_create, every attach and chimera's commands run this on
+ * the default directory, so a directory another user made first (a
+ * squatter) is refused, never used. Errors (chm_bp_last_error names the
+ * directory, its owner and mode, and the fix): -ELOOP a symbolic link;
+ * -ENOTDIR not a directory; -EPERM another owner or group/other access;
+ * -ENOENT missing (create == 0); other -errno from mkdir/lstat. */
+int chm_bp_check_dir(const char* dir, int create);
+
+/* Check, without attaching, that this process may attach the backplane at
+ * `path` (NULL: default), the check every attach makes: the file is opened
+ * without following a final symbolic link and fstat'ed; it must be a
+ * regular file owned by the caller's effective uid (root attaches files
+ * root owns, and no one else's), with no permission for others, and
+ * group-writable only when it was created for that group (config.group:
+ * mode 0660), in which case members of the group may attach too; in the
+ * default directory, that directory must pass chm_bp_check_dir. Then the
+ * header is validated. Errors (chm_bp_last_error names the file, its owner
+ * and mode, and the fix): -ELOOP a symbolic link; -EPERM another owner, or
+ * a mode that lets others (or, not made for it, the group) write;
+ * -EBADMSG not a regular file, or not a valid backplane; -ENOENT; other
+ * -errno from open. */
+int chm_bp_check_file(const char* path);
 
 /* Create a backplane file at `path` (NULL: the default path). The whole
  * file is built and its space reserved (posix_fallocate) under a temporary
  * name in the same directory, then published atomically: an opener never
  * sees a half-built file, and of two creators racing one gets -EEXIST.
  * Errors: -EEXIST the path exists; -EINVAL a config field out of range;
+ * -EINVAL also for a mode attaching would refuse (group write without
+ * config.group, any bit for others); -EPERM config.group is not one of the
+ * caller's groups, or the default directory is not the caller's alone
+ * (chm_bp_check_dir; it is created when missing);
  * -EFBIG the layout reaches 4 GiB, or the file size limit; -ENOSPC no room
  * (a full disk fails here, never later with SIGBUS); other -errno from
  * open/fallocate/mmap/link. Nothing is left behind on error. */
@@ -62,6 +103,7 @@ int chm_bp_create(const char* path, const chm_bp_config_t* cfg);
  * RTPU's kernel thread (target of directed signals).
  * Errors: -EBUSY this process is already attached, or the slot belongs to a
  * live process; -ECHRNG rtpu out of range; -ENAMETOOLONG; -ENOENT no file;
+ * -ELOOP, -EPERM the file may not be attached (chm_bp_check_file);
  * -EBADMSG not a backplane, corrupt, or another layout version (see
  * chm_bp_last_error); -ETIMEDOUT a recovery of that slot by another
  * process did not finish within 5 s; other -errno from open/mmap. */

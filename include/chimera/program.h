@@ -28,11 +28,32 @@ extern "C" {
  * a task.
  * Errors (nothing stays loaded): -EINVAL path NULL or argc < 0 or argv
  * NULL with argc > 0; -EPERM the kernel is not initialised; -ENOENT no such
- * file; -ENOEXEC not a loadable shared object (the loader's message is in
+ * file; -EACCES the file is not trusted (chm_program_error() says why: see
+ * below); -ENOEXEC not a loadable shared object (the loader's message is in
  * chm_program_error()); -ESRCH the object has no `main`; -ENOSPC
- * CHM_PROGRAM_MAX programs loaded; -ENOMEM; chm_task_spawn's errors. */
+ * CHM_PROGRAM_MAX programs loaded; -ENOMEM; chm_task_spawn's errors.
+ *
+ * Which files load: the path is resolved (every symbolic link followed) and
+ * the resolved file is loaded only when no one but this process's user or
+ * root could have changed it: the file and every directory above it are
+ * owned by the user or root and writable by no one else (group write
+ * counts unless the group is the owner's personal group: same name, no
+ * other members, as with umask 002 on Debian or Fedora), except that a
+ * sticky directory such as /tmp is fine above an entry the user or root
+ * owns (others can neither rename nor delete it). When directories were
+ * given with chm_program_trust_dir, the file must instead lie under one of
+ * them (and nothing else loads). A control program runs with the RTPU's
+ * privileges, and load requests come over the backplane (chm_rtpu_spawn). */
 int chm_program_load(const char* path, int argc, const char* const* argv,
                      const chm_task_attr_t* attr, chm_tid_t* out_main);
+
+/* Let programs load from under `dir` (resolved now, links followed), and
+ * from nowhere else: the directories given replace the ownership rule of
+ * chm_program_load. At most 8; NULL forgets them all (the ownership rule
+ * again). chimera-rtpu --programs DIR calls it.
+ * Errors: -ENOSPC 8 already; -ENOTDIR not a directory; -errno from
+ * realpath/stat (-ENOENT no such directory). */
+int chm_program_trust_dir(const char* dir);
 
 /* The exit status main returned, once it has: 0 with *status set, -EAGAIN
  * while main still runs, -ECHILD main was destroyed before it returned,

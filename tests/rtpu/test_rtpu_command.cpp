@@ -94,10 +94,11 @@ TEST_F(RtpuTest, ChimeraBadInputGivesOneClearLine) {
         std::vector<std::string> args;
         bool with_backplane;
         int status;
-        const char* says;
+        std::string says;
     };
     const std::string text = dir_ + "/text.bp";
     { std::ofstream(text) << "not a backplane\n"; }
+    chmod(text.c_str(), 0600);  // ours alone: refused for what it holds, not for who may touch it
     const std::string notso = dir_ + "/text.so";
     { std::ofstream(notso) << "not an ELF file\n"; }
     const Case cases[] = {
@@ -116,6 +117,9 @@ TEST_F(RtpuTest, ChimeraBadInputGivesOneClearLine) {
         {{"start", "--timeout", "-1"}, true, 2, "--timeout wants seconds"},
         {{"start", "--rtpus", "1", "--program", "1:" + notso}, true, 1, "cannot load"},
         {{"status", "--bogus"}, true, 2, "unknown option --bogus"},
+        {{"start", "--group", "no-such-group-chimera"}, true, 2, "--group: no group \"no-such-group-chimera\""},
+        {{"start", "--programs", dir_ + "/none"}, true, 1, "--programs " + dir_ + "/none: No such file"},
+        {{"start", "--programs", text}, true, 2, "not a directory"},
         {{"status"}, true, 1, "no backplane at"},
         {{"stop"}, true, 1, "no backplane at"},
         {{"rm"}, true, 1, "no backplane at"},

@@ -25,7 +25,7 @@ int main(int argc, char** argv) {
     View v;
     int fd = -1;
     char why[320];
-    const int r = map_file(path, false, &v, &fd, why, sizeof why);
+    const int r = map_file(path, false, &v, &fd, why, sizeof why, false);
     if (r == -EBADMSG) {
         std::printf("%s: %s\n", path, why);
         std::printf("%s: 1 problem (the header cannot be trusted; nothing else checked)\n", path);

@@ -41,10 +41,12 @@ void usage(FILE* f) {
     std::fprintf(f,
         "usage: chimera-rtpu [--backplane PATH] --rtpu N [--name NAME]\n"
         "                    [--policy muf|rm|edf|mlf|fixed] [--idle-poll US]\n"
-        "                    [--rt-priority P] [--cpu K] [--lock-memory] [--]\n"
+        "                    [--rt-priority P] [--cpu K] [--lock-memory]\n"
+        "                    [--programs DIR]... [--]\n"
         "                    [PROGRAM.so [ARG...] [-- PROGRAM.so [ARG...]]...]\n"
         "\n"
-        "Joins the backplane PATH (default $%s, else /dev/shm/chimera-$USER.bp) as\n"
+        "Joins the backplane PATH (default $%s, else backplane.bp in\n"
+        "$XDG_RUNTIME_DIR/chimera or /dev/shm/chimera-<uid>) as\n"
         "RTPU N (1..slots-1), starts the kernel and its express-mail server, loads\n"
         "each control program (a shared object with a main) and starts its main as\n"
         "a task with argv[0] = the program's path. Programs are separated by '--'.\n"
@@ -58,6 +60,9 @@ void usage(FILE* f) {
         "                  CAP_SYS_NICE or an rtprio limit)\n"
         "--cpu K           run only on CPU K\n"
         "--lock-memory     mlockall: no page fault in a control loop\n"
+        "--programs DIR    load programs (here and by express mail) only from under\n"
+        "                  DIR (any number); without it, only files that no one but\n"
+        "                  you or root can change (SECURITY.md)\n"
         "\n"
         "Exit 2: bad arguments; 1: cannot join, initialise or load a program, or\n"
         "the OS refused --rt-priority, --cpu or --lock-memory.\n",
@@ -77,6 +82,7 @@ struct Options {
     int idle_poll_us = 0;
     chimera_rtpu::HostRealtime realtime;
     std::vector<Program> programs;
+    std::vector<const char*> program_dirs;  // --programs
 };
 
 [[noreturn]] void bad(const char* fmt, const char* arg) {
@@ -132,6 +138,11 @@ Options parse(int argc, char** argv) {
         } else if (!std::strcmp(a, "--cpu")) {
             const std::string why = chimera_rtpu::parse_cpu(value(a), &o.realtime.cpu);
             if (!why.empty()) bad("%s", why.c_str());
+        } else if (!std::strcmp(a, "--programs")) {
+            const char* v = value(a);
+            struct stat st;
+            if (::stat(v, &st) != 0 || !S_ISDIR(st.st_mode)) bad("--programs \"%s\": not a directory", v);
+            o.program_dirs.push_back(v);
         } else if (!std::strcmp(a, "--lock-memory")) {
             o.realtime.lock_memory = true;
         } else if (!std::strcmp(a, "--")) {
@@ -252,6 +263,11 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "chimera-rtpu: default backplane path too long\n");
         return 1;
     }
+    for (const char* d : o.program_dirs)
+        if (int r = chm_program_trust_dir(d)) {
+            std::fprintf(stderr, "chimera-rtpu: --programs %s: %s\n", d, std::strerror(-r));
+            return 1;
+        }
     if (const std::string why = chimera_rtpu::apply(o.realtime); !why.empty()) {
         std::fprintf(stderr, "chimera-rtpu: RTPU %d: %s\n", o.rtpu, why.c_str());
         return 1;

@@ -4,9 +4,11 @@
 //   chimera start  [--backplane PATH] [--rtpus N] [--program RTPU:PATH[:ARG...]]...
 //                  [--policy P] [--rt-priority P] [--pin] [--lock-memory]
 //                  [--idle-poll US] [--log-terminal] [--timeout S]
+//                  [--group NAME] [--programs DIR]...
 //   chimera status [--backplane PATH]
 //   chimera stop   [--backplane PATH] [--timeout S]
 //   chimera rm     [--backplane PATH] [--force]
+//   chimera path   [--backplane PATH]
 //
 // start creates the backplane if absent and starts RTPUs 1..N as detached
 // chimera-rtpu processes (own session, stdin /dev/null, output to
@@ -23,6 +25,7 @@
 #include <vector>
 
 #include <fcntl.h>
+#include <grp.h>
 #include <sched.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
@@ -43,22 +46,31 @@ void usage(FILE* f) {
         "usage: chimera start  [--backplane PATH] [--rtpus N] [--program RTPU:PATH[:ARG...]]...\n"
         "                      [--policy muf|rm|edf|mlf|fixed] [--rt-priority P] [--pin]\n"
         "                      [--lock-memory] [--idle-poll US] [--log-terminal] [--timeout S]\n"
+        "                      [--group NAME] [--programs DIR]...\n"
         "       chimera status [--backplane PATH]\n"
         "       chimera stop   [--backplane PATH] [--timeout S]\n"
         "       chimera rm     [--backplane PATH] [--force]\n"
+        "       chimera path   [--backplane PATH]\n"
         "\n"
         "start   create the backplane PATH if absent (default $%s, else\n"
-        "        /dev/shm/chimera-$USER.bp) and start RTPUs 1..N (default 2) as\n"
+        "        backplane.bp in $XDG_RUNTIME_DIR/chimera or /dev/shm/chimera-<uid>,\n"
+        "        a directory of yours alone) and start RTPUs 1..N (default 2) as\n"
         "        chimera-rtpu processes, each with the programs given for it; their\n"
         "        output goes to PATH.rtpuN.log (or this terminal with --log-terminal).\n"
         "        Waits up to S seconds (default 10) until every RTPU runs and answers.\n"
         "        --rt-priority, --lock-memory and --idle-poll go to every RTPU (see\n"
         "        chimera-rtpu --help); --pin runs RTPU n on the n-th allowed CPU\n"
-        "        (round robin).\n"
+        "        (round robin). --group NAME makes a new backplane mode 0660 for\n"
+        "        that group, whose members may then attach; --programs DIR (any\n"
+        "        number) lets the RTPUs load programs only from under those\n"
+        "        directories (otherwise: files that only you or root can change).\n"
+        "        A backplane that is a link, not a regular file, not yours, or\n"
+        "        writable by others is refused (see SECURITY.md).\n"
         "status  the RTPU table and each running RTPU's tasks (through express mail)\n"
         "stop    SIGTERM every RTPU, wait up to S seconds (default 5), SIGKILL the rest\n"
         "rm      remove the backplane file and its RTPU logs; refuses while processes\n"
-        "        are attached or when the file is not a backplane, unless --force\n",
+        "        are attached or when the file is not a backplane, unless --force\n"
+        "path    print the backplane path these commands use (for scripts)\n",
         CHM_BP_ENV);
 }
 
@@ -73,6 +85,7 @@ struct StartPlan {
     std::vector<std::string> rtpu_options;  // given to every chimera-rtpu
     bool pin = false;
     bool log_terminal = false;
+    int group = -1;  // gid for a new backplane
     std::vector<std::vector<std::string>> programs;  // per RTPU: chimera-rtpu's program arguments
 };
 
@@ -147,7 +160,30 @@ int nth_allowed_cpu(int n) {
     return 0;
 }
 
-pid_t launch(const Options& o, const StartPlan& p, int n, const std::string& bin) {
+// An RTPU's log, opened here so that a refusal stops the start before any
+// RTPU runs: never through a link, appended (never truncated under an RTPU
+// still writing it), mode 0640, and a regular file of ours with one link
+// (not someone's file linked into the directory).
+int open_log(const std::string& log) {
+    const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND | O_NOFOLLOW | O_NONBLOCK | O_CLOEXEC, 0640);
+    if (fd < 0) {
+        say("cannot open the log %s: %s%s", log.c_str(), std::strerror(errno),
+            errno == ELOOP ? " (a symbolic link: remove it after checking who made it)" : "");
+        return -1;
+    }
+    struct stat st{};
+    if (fstat(fd, &st) != 0 || !S_ISREG(st.st_mode) || st.st_uid != geteuid() || st.st_nlink != 1 ||
+        (st.st_mode & 0022)) {
+        say("log %s: owner uid %u, mode 0%o, %u links: refused, a log must be a regular file of yours with one "
+            "link that others cannot write; fix: remove it after checking who made it",
+            log.c_str(), unsigned(st.st_uid), unsigned(st.st_mode & 07777), unsigned(st.st_nlink));
+        close(fd);
+        return -1;
+    }
+    return fd;
+}
+
+pid_t launch(const Options& o, const StartPlan& p, int n, const std::string& bin, int log_fd) {
     std::vector<std::string> args = {bin, "--backplane", o.backplane, "--rtpu", std::to_string(n)};
     if (!p.policy.empty()) args.insert(args.end(), {"--policy", p.policy});
     args.insert(args.end(), p.rtpu_options.begin(), p.rtpu_options.end());
@@ -156,7 +192,6 @@ pid_t launch(const Options& o, const StartPlan& p, int n, const std::string& bin
         args.push_back("--");
         for (const std::string& a : p.programs[std::size_t(n) - 1]) args.push_back(a);
     }
-    const std::string log = log_path(o.backplane, n);
     std::fflush(nullptr);
     const pid_t pid = fork();
     if (pid != 0) return pid;
@@ -164,14 +199,9 @@ pid_t launch(const Options& o, const StartPlan& p, int n, const std::string& bin
     setsid();
     const int in = open("/dev/null", O_RDONLY);
     if (in >= 0) dup2(in, 0);
-    if (!p.log_terminal) {
-        const int out = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-        if (out < 0) {
-            std::fprintf(stderr, "chimera: cannot open %s: %s\n", log.c_str(), std::strerror(errno));
-            _exit(127);
-        }
-        dup2(out, 1);
-        dup2(out, 2);
+    if (log_fd >= 0) {
+        dup2(log_fd, 1);
+        dup2(log_fd, 2);
     }
     sigset_t none;
     sigemptyset(&none);
@@ -189,9 +219,17 @@ int cmd_start(const Options& o, const StartPlan& p) {
         bad("--program for RTPU " + std::to_string(p.programs.size()) + " but only " + std::to_string(p.rtpus) +
             " RTPUs are started (--rtpus)");
     bool created = false;
-    if (access(o.backplane.c_str(), F_OK) != 0) {
+    struct stat ls{};
+    if (lstat(o.backplane.c_str(), &ls) == 0) {
+        // An existing file is checked before any RTPU starts on it.
+        if (chm_bp_check_file(o.backplane.c_str()) != 0) {
+            say("%s", chm_bp_last_error());
+            return 1;
+        }
+    } else {
         chm_bp_config_t cfg;
         chm_bp_config_init(&cfg);
+        cfg.group = p.group;
         cfg.ring_records = 32;
         cfg.ring_record_size = 1024;  // a spawn request carries a path and arguments
         if (std::uint32_t(p.rtpus) + 2 > cfg.rtpu_slots) bad("--rtpus at most " + std::to_string(cfg.rtpu_slots - 2));
@@ -202,8 +240,19 @@ int cmd_start(const Options& o, const StartPlan& p) {
         created = true;
     }
     const std::string bin = find_rtpu_binary();
+    std::vector<int> logs(std::size_t(p.rtpus) + 1, -1);
+    for (int n = 1; n <= p.rtpus && !p.log_terminal; ++n) {
+        if ((logs[std::size_t(n)] = open_log(log_path(o.backplane, n))) >= 0) continue;
+        for (int fd : logs)
+            if (fd >= 0) close(fd);
+        if (created) unlink(o.backplane.c_str());
+        return 1;
+    }
     std::vector<pid_t> pids(std::size_t(p.rtpus) + 1, 0);
-    for (int n = 1; n <= p.rtpus; ++n) pids[std::size_t(n)] = launch(o, p, n, bin);
+    for (int n = 1; n <= p.rtpus; ++n) {
+        pids[std::size_t(n)] = launch(o, p, n, bin, logs[std::size_t(n)]);
+        if (logs[std::size_t(n)] >= 0) close(logs[std::size_t(n)]);
+    }
 
     // Watch them come up: through the table and a ping each.
     std::string failure;
@@ -296,8 +345,8 @@ int main(int argc, char** argv) {
         usage(stdout);
         return 0;
     }
-    if (cmd != "start" && cmd != "status" && cmd != "stop" && cmd != "rm")
-        bad("unknown command \"" + cmd + "\" (start, status, stop or rm)");
+    if (cmd != "start" && cmd != "status" && cmd != "stop" && cmd != "rm" && cmd != "path")
+        bad("unknown command \"" + cmd + "\" (start, status, stop, rm or path)");
     Options o;
     StartPlan plan;
     std::vector<const char*> programs;
@@ -344,6 +393,21 @@ int main(int argc, char** argv) {
             plan.rtpu_options.push_back(a);
         } else if (a == "--pin" && starting) {
             plan.pin = true;
+        } else if (a == "--group" && starting) {
+            const char* v = value();
+            const group* g = getgrnam(v);
+            if (!g) bad(std::string("--group: no group \"") + v + "\"");
+            plan.group = int(g->gr_gid);
+        } else if (a == "--programs" && starting) {
+            const char* v = value();
+            char real[PATH_MAX];
+            struct stat st{};
+            if (!realpath(v, real) || stat(real, &st) != 0) {
+                say("--programs %s: %s", v, std::strerror(errno));
+                return 1;
+            }
+            if (!S_ISDIR(st.st_mode)) bad(std::string("--programs ") + v + ": not a directory");
+            plan.rtpu_options.insert(plan.rtpu_options.end(), {"--programs", real});
         } else if (a == "--log-terminal" && starting) {
             plan.log_terminal = true;
         } else if (a == "--force" && cmd == "rm") {
@@ -362,6 +426,10 @@ int main(int argc, char** argv) {
     if (cmd == "start") {
         for (const char* spec : programs) add_program(&plan, spec);
         return cmd_start(o, plan);
+    }
+    if (cmd == "path") {
+        std::printf("%s\n", o.backplane.c_str());
+        return 0;
     }
     if (cmd == "status") return cmd_status(o);
     if (cmd == "stop") return cmd_stop(o);

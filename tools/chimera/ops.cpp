@@ -9,6 +9,7 @@
 #include <vector>
 
 #include <dirent.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include "chimera/bp.h"
@@ -233,8 +234,14 @@ int cmd_rm(const Options& o) {
     }
     chm::bp::View v;
     int fd = -1;
-    char why[320];
-    const int r = chm::bp::map_file(path, false, &v, &fd, why, sizeof why);
+    char why[768];
+    const int r = chm::bp::map_file(path, false, &v, &fd, why, sizeof why, true);
+    struct stat ls{};
+    if (r == -EPERM || r == -ELOOP || (lstat(path, &ls) == 0 && !S_ISREG(ls.st_mode))) {
+        // Not ours to judge, whatever --force says.
+        say("%s: %s", path, why);
+        return 1;
+    }
     if (r && !o.force) {
         say("%s is not a usable backplane file (%s): not removed (rm --force removes it anyway)", path, why);
         return 1;
@@ -261,7 +268,8 @@ int cmd_rm(const Options& o) {
         say("cannot remove %s: %s", path, std::strerror(errno));
         return 1;
     }
-    // Its RTPU logs (PATH.rtpuN.log).
+    // Its RTPU logs (PATH.rtpuN.log): only files of ours (in a shared
+    // directory such as /tmp, root could otherwise remove anyone's).
     const std::string p(path);
     const std::size_t cut = p.rfind('/');
     const std::string dir = cut == std::string::npos ? "." : p.substr(0, cut ? cut : 1);
@@ -270,8 +278,10 @@ int cmd_rm(const Options& o) {
     if (DIR* d = opendir(dir.c_str())) {
         while (dirent* e = readdir(d)) {
             const std::string n = e->d_name;
+            struct stat ls{};
             if (n.size() > base.size() + 4 && n.compare(0, base.size(), base) == 0 &&
-                n.compare(n.size() - 4, 4, ".log") == 0 && unlink((dir + "/" + n).c_str()) == 0)
+                n.compare(n.size() - 4, 4, ".log") == 0 && lstat((dir + "/" + n).c_str(), &ls) == 0 &&
+                ls.st_uid == geteuid() && unlink((dir + "/" + n).c_str()) == 0)
                 ++logs;
         }
         closedir(d);

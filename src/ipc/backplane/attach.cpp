@@ -163,8 +163,8 @@ int attach(const char* path, int want, SlotKind kind, const char* name, int* slo
         return set_error("this process is already attached to %s", g_att.path), -EBUSY;
     }
     Attachment& a = g_att;
-    char why[320];
-    int r = map_file(path, true, &a, &a.fd, why, sizeof why);
+    char why[768];
+    int r = map_file(path, true, &a, &a.fd, why, sizeof why, true);
     if (r) {
         ::pthread_mutex_unlock(&g_mu);
         set_error("backplane %s: %s", path, why);

@@ -11,6 +11,8 @@
 #include <cstddef>
 #include <cstdint>
 
+#include <sys/stat.h>
+
 #include "ipc/backplane/layout.hpp"
 
 namespace chm::bp {
@@ -80,7 +82,22 @@ int validate_header(const Header& h, std::uint64_t file_size, char* why, std::si
 
 // Open, validate and map a backplane file (read-write or read-only).
 // Nothing is left mapped or open on error; `why` names the problem.
-int map_file(const char* path, bool writable, View* out, int* fd_out, char* why, std::size_t n);
+// `trust`: refuse a file this process must not attach (check_trust, and
+// the default directory's check): every attach, chimera status/stop/rm;
+// only the read-only checker (chimera-bpcheck) looks at any file.
+int map_file(const char* path, bool writable, View* out, int* fd_out, char* why, std::size_t n,
+             bool trust);
+
+// trust.cpp. Whether a file (fstat'ed from the open descriptor) may be
+// attached by this process: a regular file owned by the caller (or shared
+// with the caller's group when made for it), no permission for others.
+// `h` is its header (NULL when unread). 0, -EBADMSG or -EPERM with `why`.
+int check_trust(const struct stat& st, const Header* h, char* why, std::size_t n);
+// Before opening: a symlink (-ELOOP) or a non-regular file (-EBADMSG) at
+// `path`, described for the message; 0 otherwise (the fstat decides).
+int describe_untrusted_path(const char* path, char* why, std::size_t n);
+// When `path` lies in the default directory: chm_bp_check_dir on it.
+int check_default_dir_of(const char* path, bool create);
 void unmap(View* v);
 
 // Geometry -> file layout. Returns false (and `why`) when out of range.

@@ -22,9 +22,18 @@ namespace chm::bp {
 
 namespace {
 
-thread_local char t_error[512];
+thread_local char t_error[1024];
 
 constexpr std::uint64_t round_up(std::uint64_t x, std::uint64_t a) { return (x + a - 1) / a * a; }
+
+bool in_my_groups(gid_t gid) {
+    if (::getegid() == gid || ::geteuid() == 0) return true;
+    gid_t groups[256];
+    const int k = ::getgroups(256, groups);
+    for (int i = 0; i < k; ++i)
+        if (groups[i] == gid) return true;
+    return false;
+}
 
 }  // namespace
 
@@ -131,11 +140,23 @@ int validate_header(const Header& h, std::uint64_t file_size, char* why, std::si
     return 0;
 }
 
-int map_file(const char* path, bool writable, View* out, int* fd_out, char* why, std::size_t n) {
-    const int fd = ::open(path, (writable ? O_RDWR : O_RDONLY) | O_CLOEXEC);
+int map_file(const char* path, bool writable, View* out, int* fd_out, char* why, std::size_t n, bool trust) {
+    if (trust) {
+        // The directory first: a squatted default directory is the attack,
+        // whatever file it holds.
+        if (int r = check_default_dir_of(path, false); r && r != -ENOENT) {
+            std::snprintf(why, n, "%s", chm_bp_last_error());
+            return r;
+        }
+        if (int r = describe_untrusted_path(path, why, n)) return r;
+    }
+    // O_NOFOLLOW: a link swapped in after the check above is not followed;
+    // O_NONBLOCK: a FIFO put there does not hang the opener.
+    const int fd = ::open(path, (writable ? O_RDWR : O_RDONLY) | O_CLOEXEC | O_NOFOLLOW | O_NONBLOCK);
     if (fd < 0) {
         const int e = errno;
-        std::snprintf(why, n, "cannot open: %s", std::strerror(e));
+        if (e == ELOOP) std::snprintf(why, n, "is a symbolic link: refused; fix: name the real file");
+        else std::snprintf(why, n, "cannot open: %s", std::strerror(e));
         return -e;
     }
     struct stat st{};
@@ -145,13 +166,15 @@ int map_file(const char* path, bool writable, View* out, int* fd_out, char* why,
         r = -errno;
         std::snprintf(why, n, "cannot stat: %s", std::strerror(-r));
     } else if (!S_ISREG(st.st_mode)) {
-        r = -EBADMSG;
-        std::snprintf(why, n, "not a regular file");
+        r = trust ? check_trust(st, nullptr, why, n) : -EBADMSG;
+        if (!trust) std::snprintf(why, n, "not a regular file");
     } else {
         const ssize_t got = st.st_size >= static_cast<off_t>(sizeof h) ? ::pread(fd, &h, sizeof h, 0) : 0;
         if (got < 0) {
             r = -errno;
             std::snprintf(why, n, "cannot read the header: %s", std::strerror(-r));
+        } else if (trust && (r = check_trust(st, got == ssize_t(sizeof h) ? &h : nullptr, why, n)) != 0) {
+            // refused before anything in it is used
         } else {
             r = validate_header(h, static_cast<std::uint64_t>(st.st_size), why, n);
         }
@@ -228,22 +251,7 @@ void chm_bp_config_init(chm_bp_config_t* cfg) {
     cfg->common_size = 8u << 20;
     cfg->registry_capacity = 256;
     cfg->mode = 0600;
-}
-
-int chm_bp_default_path(char* buf, size_t len) {
-    if (!buf) return -EINVAL;
-    const char* env = std::getenv(CHM_BP_ENV);
-    int n;
-    if (env && *env) {
-        n = std::snprintf(buf, len, "%s", env);
-    } else {
-        const passwd* pw = ::getpwuid(::getuid());
-        if (pw && pw->pw_name)
-            n = std::snprintf(buf, len, "/dev/shm/chimera-%s.bp", pw->pw_name);
-        else
-            n = std::snprintf(buf, len, "/dev/shm/chimera-%u.bp", unsigned(::getuid()));
-    }
-    return (n < 0 || static_cast<size_t>(n) >= len) ? -ENAMETOOLONG : 0;
+    cfg->group = -1;
 }
 
 int chm_bp_create(const char* path, const chm_bp_config_t* cfg) {
@@ -265,6 +273,18 @@ int chm_bp_create(const char* path, const chm_bp_config_t* cfg) {
         return std::strstr(why, "4 GiB") ? -EFBIG : -EINVAL;
     }
     if (c.mode & ~0777u) return set_error("backplane %s: config mode 0%o has bits outside 0777", path, c.mode), -EINVAL;
+    // A file that attach would refuse is never made (trust.cpp).
+    if (c.group >= 0) c.mode = 0660;
+    else if (c.mode & 0027)
+        return set_error("backplane %s: config mode 0%o gives %s write access: attaching would be refused "
+                         "(set config.group to share it with a group: mode 0660)", path, c.mode,
+                         (c.mode & 0007) ? "others" : "the group"), -EINVAL;
+    if (c.mode & 0007)
+        return set_error("backplane %s: config mode 0%o gives others access: attaching would be refused", path,
+                         c.mode), -EINVAL;
+    if (c.group >= 0 && !in_my_groups(gid_t(c.group)))
+        return set_error("backplane %s: config group %d: you are not a member of it", path, int(c.group)), -EPERM;
+    if (int e = check_default_dir_of(path, true)) return e;
 
     // The temporary file lives in the same directory so the publish is a
     // rename within one file system.
@@ -277,16 +297,21 @@ int chm_bp_create(const char* path, const chm_bp_config_t* cfg) {
     if (tn < 0 || size_t(tn) >= sizeof tmp) return set_error("backplane %s: path too long", path), -ENAMETOOLONG;
 
     struct stat st{};
-    if (::stat(path, &st) == 0) return set_error("backplane %s: already exists", path), -EEXIST;
+    if (::lstat(path, &st) == 0) return set_error("backplane %s: already exists", path), -EEXIST;
 
-    const int fd = ::open(tmp, O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, c.mode);
+    const int fd = ::open(tmp, O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC | O_NOFOLLOW, c.mode);
     if (fd < 0) {
         const int e = errno;
         set_error("backplane %s: cannot create %s: %s", path, tmp, std::strerror(e));
         return -e;
     }
-    int r = ::posix_fallocate(fd, 0, static_cast<off_t>(plan.file_size));
-    if (r != 0) {
+    // The exact mode and group, whatever the umask.
+    int r = 0;
+    if ((c.group >= 0 && ::fchown(fd, uid_t(-1), gid_t(c.group)) != 0) || ::fchmod(fd, c.mode) != 0) {
+        r = -errno;
+        set_error("backplane %s: cannot set group %d and mode 0%o: %s", path, int(c.group), c.mode,
+                  std::strerror(-r));
+    } else if ((r = ::posix_fallocate(fd, 0, static_cast<off_t>(plan.file_size))) != 0) {
         set_error("backplane %s: cannot reserve %u bytes: %s", path, plan.file_size, std::strerror(r));
         r = -r;
     } else {
@@ -298,6 +323,10 @@ int chm_bp_create(const char* path, const chm_bp_config_t* cfg) {
             View v;
             v.base = static_cast<char*>(p);
             v.size = plan.file_size;
+            if (c.group >= 0) {  // group members may attach (trust.cpp)
+                plan.ext[kExtGroupFlag] = kGroupMarker;
+                plan.ext[kExtGroupId] = std::uint32_t(c.group);
+            }
             init_contents(v, plan);
             unmap(&v);
             r = publish(tmp, path);

@@ -83,6 +83,10 @@ struct Geometry {
     std::uint32_t registry_capacity;  // name registry entries
 };
 
+inline constexpr unsigned kExtGroupFlag = 0;
+inline constexpr unsigned kExtGroupId = 1;
+inline constexpr std::uint32_t kGroupMarker = 0x47525550;  // "GRUP"
+
 struct Header {
     std::uint32_t magic;          // kMagic (kMagicSwapped: other byte order)
     std::uint32_t version;        // kLayoutVersion
@@ -100,6 +104,8 @@ struct Header {
     A32 last_recovery_ms;         // monotonic ms when the last recovery ended
     // Reserved for later subsystems (state-variable table, console...):
     // zero at creation; each user documents its word here when it claims it.
+    // ext[0] = kGroupMarker and ext[1] = gid: created for that group (mode
+    // 0660), so group members may attach (trust.cpp).
     std::uint32_t ext[16];
     std::uint32_t reserved[8];
 };

@@ -64,7 +64,7 @@ int do_ping(char* rep, std::uint32_t* n) {
     return 0;
 }
 
-int do_spawn(const char* req, std::uint32_t len, char* rep, std::uint32_t* n) {
+int do_spawn(const char* req, std::uint32_t len, char* rep, std::uint32_t* n, std::uint32_t from) {
     SpawnRequest h;
     if (len < sizeof h) return -EINVAL;
     std::memcpy(&h, req, sizeof h);
@@ -90,6 +90,13 @@ int do_spawn(const char* req, std::uint32_t len, char* rep, std::uint32_t* n) {
     *n = sizeof out;
     if (prog < 0) {
         const char* why = chm_program_error();
+        // A refused path is an attempt someone may want to trace: the log
+        // says which slot asked (its process is whoever holds that slot).
+        if (prog == -EACCES) {
+            const bp::Attachment* a = bp::current();
+            std::fprintf(stderr, "chimera-rtpu: RTPU %d: refused a spawn request from slot %u: %s\n",
+                         a ? int(a->slot) : -1, unsigned(from), why);
+        }
         const std::uint32_t room = g_s.room - sizeof out;
         const std::uint32_t k = std::uint32_t(std::min<std::size_t>(std::strlen(why), room - 1));
         std::memcpy(rep + sizeof out, why, k);
@@ -171,11 +178,11 @@ int do_tasks(const char* req, std::uint32_t len, char* rep, std::uint32_t* n) {
     return 0;
 }
 
-int dispatch(Kind kind, const char* req, std::uint32_t len, char* rep, std::uint32_t* n) {
+int dispatch(Kind kind, const char* req, std::uint32_t len, char* rep, std::uint32_t* n, std::uint32_t from) {
     *n = 0;
     switch (kind) {
     case kPing: return do_ping(rep, n);
-    case kSpawn: return do_spawn(req, len, rep, n);
+    case kSpawn: return do_spawn(req, len, rep, n, from);
     case kSignal:
     case kDestroy: return do_task(kind, req, len);
     case kFind: return do_find(req, len, rep, n);
@@ -202,7 +209,7 @@ void serve(Record* r, std::uint32_t seq) {
     const Kind kind = Kind(r->kind);
     std::memcpy(g_s.req, payload_of(r), len);
     std::uint32_t n = 0;
-    const int status = dispatch(kind, g_s.req, len, g_s.rep, &n);
+    const int status = dispatch(kind, g_s.req, len, g_s.rep, &n, bp::token_slot(r->owner.load(R)));
     r->status = status;
     r->len = n;
     if (n) std::memcpy(payload_of(r), g_s.rep, n);

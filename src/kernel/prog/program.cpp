@@ -2,6 +2,7 @@
 // spawn main(argc, argv). Programs stay loaded until chm_kernel_fini (a
 // task spawned by main may still run their code after main returns).
 #include <cerrno>
+#include <climits>
 #include <cstdio>
 #include <cstring>
 #include <dlfcn.h>
@@ -11,6 +12,7 @@
 #include "chimera/mem.h"
 #include "chimera/program.h"
 #include "kernel.hpp"
+#include "prog/trust.hpp"
 
 namespace chm::kernel {
 namespace {
@@ -29,7 +31,7 @@ struct Program {
 };
 
 Program g_programs[CHM_PROGRAM_MAX];
-char g_error[256];
+char g_error[768];
 
 void set_error(const char* what) {
     std::snprintf(g_error, sizeof g_error, "%s", what ? what : "");
@@ -88,11 +90,10 @@ int chm_program_load(const char* path, int argc, const char* const* argv,
     set_error(nullptr);
     if (!path || argc < 0 || (argc > 0 && !argv)) return -EINVAL;
     if (!g_k.initialised) return -EPERM;
-    struct stat st;
-    if (stat(path, &st) != 0) {
-        set_error(std::strerror(errno));
-        return -ENOENT;
-    }
+    // The file dlopen gets is the one checked: every link resolved, and no
+    // one but us or root can change it or the directories above it.
+    char real[PATH_MAX];
+    if (int e = program_path_check(path, real, sizeof real, g_error, sizeof g_error)) return e;
     Program* p = nullptr;
     for (Program& q : g_programs) {
         if (!q.used) {
@@ -103,7 +104,7 @@ int chm_program_load(const char* path, int argc, const char* const* argv,
     if (!p) return -ENOSPC;
     p->used = true;
     // RTLD_LOCAL: two programs may both define helpers of the same name.
-    p->handle = dlopen(path, RTLD_NOW | RTLD_LOCAL);
+    p->handle = dlopen(real, RTLD_NOW | RTLD_LOCAL);
     if (!p->handle) {
         set_error(dlerror());
         *p = Program{};
