@@ -80,6 +80,10 @@ void quantum_arm_locked(Tcb* t, std::uint64_t now) {
     if (!head || (!may_overtake_locked(head, t) && sched_before_locked(t, head, now))) return;
     std::uint64_t due = g_k.slice_start + q;
     if (now >= due) due += (now - due) / q * q + q;  // the first end after now
+    // A timer due first is a decision point that arms it then: a periodic
+    // set whose releases come before each quantum's end costs no timer
+    // re-arm per switch.
+    if (const TimerNode* top = g_k.timers.top(); top && top->due <= due) return;
     g_k.quantum_due = due;
     timer_program_locked(now);
 }
