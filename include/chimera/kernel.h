@@ -15,6 +15,11 @@ extern "C" {
 
 #define CHM_OK 0
 
+/* Timeouts, in every blocking call that takes one: relative nanoseconds,
+ * with these two named values. */
+#define CHM_FOREVER UINT64_MAX /* wait as long as it takes */
+#define CHM_NO_WAIT 0          /* do not wait: succeed now or fail */
+
 /* Built-in scheduling policies (DESIGN.md, "The policies, precisely"). */
 enum chm_sched_policy {
     CHM_SCHED_MUF = 0, /* maximum urgency first: criticality, laxity, priority (default) */

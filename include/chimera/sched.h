@@ -98,7 +98,9 @@ typedef struct chm_sched_ops {
     /* Required. A new task is known (before it is first enqueued); return 0
      * to accept it or a negative status (-EAGAIN) to refuse it. */
     int (*admit)(void* self, chm_sched_task_t* t);
-    /* Required. The task is gone for good (it is not enqueued). */
+    /* Required. The task is gone for good (it is not enqueued). A task
+     * whose timing changes (chm_task_set_timing) is retired and admitted
+     * again at its next release, with the new timing. */
     void (*retire)(void* self, chm_sched_task_t* t);
     /* Required. The task became ready (it is not the running task). */
     void (*enqueue)(void* self, chm_sched_task_t* t, uint64_t now);

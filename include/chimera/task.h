@@ -6,6 +6,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "chimera/kernel.h"
+
 #ifdef __cplusplus
 extern "C" {
 #endif
@@ -52,6 +54,7 @@ typedef struct chm_task_attr {
     chm_deadline_handler_t on_deadline; /* NULL: the miss becomes an error signal */
     void* on_deadline_arg;
     int handler_priority;  /* 0 = run the handler at the task's own priority */
+    int joinable;          /* 1: keep its slot and final status until chm_task_join */
 } chm_task_attr_t;
 
 /* Fill `attr` with defaults (aperiodic, priority 0, default stack). */
@@ -65,13 +68,75 @@ void chm_task_attr_init(chm_task_attr_t* attr);
  * -ENOMEM; -EPERM kernel not initialised. Nothing is left behind on error. */
 int chm_task_spawn(chm_tid_t* out, void (*entry)(void* arg), void* arg, const chm_task_attr_t* attr);
 
-/* End the calling task. Task context. Does not return. */
+/* End the calling task (exit status 0). Task context. Does not return.
+ * Its end hooks run first (chm_task_on_end). */
 void chm_task_exit(void);
 
-/* Destroy a task (itself included: then like chm_task_exit). Its stack is
- * freed; semaphores it holds are NOT released (see chm_sem docs).
- * Errors: -ESRCH unknown task. */
+/* End the calling task with `status`, which chm_task_join reports. Task
+ * context. Does not return. */
+void chm_task_end(int status);
+
+/* Destroy a task (itself included: then like chm_task_exit). It is taken
+ * off the CPU first, then its end hooks run in the caller's context, then
+ * its stack is freed; semaphores it holds are NOT released (see chm_sem
+ * docs). Errors: -ESRCH unknown task. */
 int chm_task_destroy(chm_tid_t task);
+
+/* How a task ended (chm_task_status_t.end_reason). */
+enum chm_task_end_reason {
+    CHM_TASK_LIVE = 0,      /* it has not ended */
+    CHM_TASK_RETURNED = 1,  /* its entry returned (exit status 0) */
+    CHM_TASK_EXITED = 2,    /* chm_task_exit or chm_task_end(status) */
+    CHM_TASK_ABORTED = 3,   /* an error signal or processor exception aborted it */
+    CHM_TASK_DESTROYED = 4  /* chm_task_destroy by another task, or the RTPU's end */
+};
+
+/* Run hook(arg) when the calling task ends, whichever way: return, exit,
+ * abort, destroy, the kernel's teardown (chm_kernel_fini). Hooks run most
+ * recently registered first, once each, before the task's end is visible
+ * to joiners. They run in the task's own context when it ends itself
+ * (return, exit, abort), and in the destroyer's context (or the kernel
+ * thread's, at teardown) when another ends it; a hook that faults or raises
+ * an error does not stop the others. Up to 8 per task. Task context.
+ * Errors: -EINVAL NULL hook; -ENOSPC 8 already; -EPERM not in a task;
+ * -ENOMEM. */
+int chm_task_on_end(void (*hook)(void* arg), void* arg);
+
+/* Task-local storage: a key names one slot in every task; a task's value
+ * for it starts NULL. Up to 32 keys per RTPU; keys are never deleted.
+ * `destructor` (may be NULL) is called with a task's non-NULL value when
+ * that task ends, after its end hooks. Errors: -EINVAL NULL key; -EAGAIN
+ * 32 keys exist. */
+typedef uint32_t chm_task_key_t;
+int chm_task_key_create(chm_task_key_t* key, void (*destructor)(void* value));
+/* The calling task's value for `key` (NULL if none, or outside a task). */
+void* chm_task_get_local(chm_task_key_t key);
+/* Set it. Errors: -EINVAL unknown key; -EPERM not in a task; -ENOMEM. */
+int chm_task_set_local(chm_task_key_t key, void* value);
+
+/* Timing of a periodic task, as chm_task_set_timing takes it. */
+typedef struct chm_task_timing {
+    uint64_t period_ns;    /* > 0 */
+    uint64_t deadline_ns;  /* relative; 0 = the period; <= period */
+    uint64_t wcet_ns;      /* estimated CPU per cycle; <= deadline */
+    int critical;          /* MUF: 1 = always in the critical set */
+} chm_task_timing_t;
+
+/* Change a periodic task's timing while it runs. Takes effect at its next
+ * release: that cycle has the new deadline and estimate, and releases from
+ * it on are spaced by the new period (the next release itself stays where
+ * the old period put it: the grid is never broken). The scheduler re-admits
+ * the task then (MUF's critical set is updated; among tasks of equal period
+ * it ranks as the newest). A later call before that release replaces an
+ * earlier one. A task that holds a semaphore while a more urgent waiter
+ * lends it its timing takes the change at its first release after the
+ * loan. Under a user scheduler that refuses the new timing at that
+ * release, the task keeps its old timing and the refusal is counted in
+ * chm_task_status_t.timing_refused.
+ * Errors: -ESRCH unknown task; -EINVAL NULL, an aperiodic task (period 0),
+ * a period of 0, a deadline beyond the period, an estimate beyond the
+ * deadline. */
+int chm_task_set_timing(chm_tid_t task, const chm_task_timing_t* timing);
 
 /* Suspend until chm_task_resume (counted). Errors: -ESRCH. */
 int chm_task_suspend(chm_tid_t task);
@@ -129,6 +194,9 @@ typedef struct chm_task_status {
     uint64_t worst_cycle_cpu_ns;  /* worst CPU time of one cycle */
     size_t stack_size;
     size_t stack_high_water;  /* most stack ever used, bytes */
+    enum chm_task_end_reason end_reason; /* CHM_TASK_LIVE while it runs */
+    int exit_status;          /* chm_task_end's status; 0 otherwise */
+    uint64_t timing_refused;  /* chm_task_set_timing changes a user scheduler refused */
 } chm_task_status_t;
 
 /* Snapshot of a task. A task that ended stays readable (state
@@ -138,6 +206,17 @@ typedef struct chm_task_status {
  * spawned as there were free slots when it ended.
  * Errors: -ESRCH unknown task (or ended and its slot reused), -EINVAL NULL. */
 int chm_task_status(chm_tid_t task, chm_task_status_t* out);
+
+/* Wait until `task` ends (at most timeout_ns; CHM_FOREVER, CHM_NO_WAIT),
+ * then give its final status (out may be NULL: end_reason and exit_status
+ * say how it ended) and free its slot: its id is stale from then on. Only
+ * a task spawned with attr.joinable can be joined, by one task at a time;
+ * it keeps its slot until then. Task context.
+ * Errors: -ESRCH unknown task; -EINVAL not joinable; -EDEADLK joining
+ * itself; -EBUSY another task joins it; -ETIMEDOUT it did not end in time
+ * (it stays joinable); -EINTR a user signal interrupted the wait; -EPERM
+ * not in a task. */
+int chm_task_join(chm_tid_t task, uint64_t timeout_ns, chm_task_status_t* out);
 
 /* Number of tasks alive. Any context. */
 int chm_task_count(void);

@@ -118,6 +118,21 @@ struct Tcb {
     std::uint64_t misses_unhandled = 0;  // since its deadline handler last ran
     std::size_t final_high_water = 0;    // stack high water when the stack was released
 
+    // Its end (task/lifecycle.cpp): how and with what status; a joinable
+    // task keeps its slot until joined; hooks and task-local values live
+    // in `ext`, allocated on first use; a timing change waits for the
+    // next release.
+    std::uint8_t end_reason = 0;      // chm_task_end_reason
+    bool joinable = false;
+    bool stack_gone = false;          // its stack was released (slot held for a joiner)
+    bool joined = false;              // chm_task_join took its status: its id is stale
+    bool timing_pending = false;
+    int exit_status = 0;
+    WaitQueue joiners;
+    struct TaskExt* ext = nullptr;
+    chm_task_timing_t new_timing{};
+    std::uint64_t timing_refused = 0;
+
     // Priority inheritance: the view fields this task owns while it lends
     // a waiter's urgency.
     bool boosted = false;
@@ -335,6 +350,17 @@ inline chm_tid_t tid_of(const Tcb* t) { return chm_tid_t(t->index | (std::uint32
 // pointer that is not inside the TCB array.
 bool tcb_view_valid(const chm_sched_task_t* s);
 void task_end_locked(Tcb* t);         // unlink everywhere, mark ended
+// End the running task with `reason` and `status`: its hooks first (task
+// context, mask free), then the end proper. Does not return.
+[[noreturn]] void task_end_current(chm_task_end_reason reason, int status);
+// Another task's end hooks and local-value destructors, in the caller's
+// context (destroy, teardown); `t` is already off the CPU for good.
+void task_run_end_hooks(Tcb* t);
+// Apply a pending chm_task_set_timing at a release (the task is not queued).
+void task_apply_timing_locked(Tcb* t);
+// The slot of an ended task goes back to the free list (after its stack,
+// and after a join for a joinable task).
+void slot_release_locked(Tcb* t);
 void task_free_stack(Tcb* t);         // after the last switch away from it: frees the slot too
 // Entry of every task context: drops the switcher's mask, runs the entry.
 void task_start(void* tcb);

@@ -182,6 +182,12 @@ int chm_kernel_on_shutdown(void (*hook)(void*), void* arg) {
 
 void chm_kernel_fini(void) {
     if (!g_k.initialised || g_k.running) return;
+    // The tasks still there end with the kernel: their hooks first, in the
+    // kernel thread's context (no current task).
+    for (std::uint32_t i = 0; i < g_k.tcb_hw; ++i) {
+        Tcb* t = &g_k.tcbs[i];
+        if (t->used && t->state != TaskState::Ended) task_run_end_hooks(t);
+    }
     port::irq_disable();
     for (std::uint32_t i = 0; i < g_k.tcb_hw; ++i) {
         Tcb* t = &g_k.tcbs[i];

@@ -216,8 +216,7 @@ void err_abort_current() {
     port::irq_disable();
     g_aborting = g_k.current;
     port::irq_restore();
-    chm_task_exit();
-    __builtin_unreachable();
+    task_end_current(CHM_TASK_ABORTED, 0);
 }
 
 void err_task_ended_locked(Tcb* t) {

@@ -1,6 +1,7 @@
 // Task management: the TCB array, spawn, exit, destroy, suspend, resume,
 // static priority, lookup and status.
 #include <cerrno>
+#include <cstdlib>
 #include <cstring>
 #include <new>
 #include <sys/mman.h>
@@ -47,10 +48,12 @@ Tcb* slot_take_locked() {
     return t;
 }
 
+}  // namespace
+
 // Slots are reused oldest-freed first: an ended task's final status stays
 // readable (chm_task_status) for as long as possible, and a slot's
 // generation, hence a stale id, comes round as slowly as possible.
-void slot_give_back_locked(Tcb* t) {
+void slot_release_locked(Tcb* t) {
     t->used = false;
     t->next_free = -1;
     const std::int32_t i = std::int32_t(t->index);
@@ -58,6 +61,8 @@ void slot_give_back_locked(Tcb* t) {
     else g_k.free_slot = i;
     g_k.free_tail = i;
 }
+
+namespace {
 
 int check_attr(const chm_task_attr_t& a, std::size_t* stack) {
     *stack = a.stack_size ? a.stack_size : g_k.cfg.default_stack;
@@ -91,7 +96,7 @@ Tcb* tcb_lookup_ended_too(chm_tid_t id) {
     if (i >= g_k.tcb_hw) return nullptr;
     Tcb* t = &g_k.tcbs[i];
     if (t->gen != (std::uint32_t(id) >> 16)) return nullptr;
-    return t->used || t->state == TaskState::Ended ? t : nullptr;
+    return (t->used || t->state == TaskState::Ended) && !t->joined ? t : nullptr;
 }
 
 bool tcb_view_valid(const chm_sched_task_t* s) {
@@ -116,10 +121,11 @@ void task_start(void* p) {
     deliver_pending_locked();
     port::irq_restore();
     t->entry(t->arg);
-    chm_task_exit();
+    task_end_current(CHM_TASK_RETURNED, 0);
 }
 
 void release_cycle_locked(Tcb* t, std::uint64_t release) {
+    task_apply_timing_locked(t);  // chm_task_set_timing takes effect here
     // Counted here, not when the task returns from its wait: a deadline
     // that passes before it runs again names the cycle that missed.
     t->cycle = t->releases++;
@@ -150,15 +156,20 @@ void task_end_locked(Tcb* t) {
     timer_cancel_locked(&t->tmr);
     timer_cancel_locked(&t->dl);
     g_k.ops->retire(g_k.ops_self, &t->s);
+    if (!t->end_reason) t->end_reason = CHM_TASK_DESTROYED;
     t->state = TaskState::Ended;
     --g_k.alive;
+    while (Tcb* j = t->joiners.head) wake_locked(j, 0);
+    std::free(t->ext);  // its hooks and local values were run already
+    t->ext = nullptr;
 }
 
 void task_free_stack(Tcb* t) {
     t->final_high_water = stack_dirty_estimate(t);
     stacks_release(t->stack_lo, t->stack_size, t->final_high_water);
     t->stack_lo = nullptr;
-    slot_give_back_locked(t);
+    t->stack_gone = true;
+    if (!t->joinable) slot_release_locked(t);  // a joinable task's waits for chm_task_join
 }
 
 }  // namespace chm::kernel
@@ -207,10 +218,11 @@ int chm_task_spawn(chm_tid_t* out, void (*entry)(void*), void* arg, const chm_ta
     t->on_deadline = a.on_deadline;
     t->on_deadline_arg = a.on_deadline_arg;
     t->handler_priority = a.handler_priority;
+    t->joinable = a.joinable != 0;
     port::context_init(&t->ctx, lo, stack, task_start, t);
     if (int e = g_k.ops->admit(g_k.ops_self, &t->s)) {
         stacks_release(lo, stack, 0);
-        slot_give_back_locked(t);
+        slot_release_locked(t);
         return e < 0 ? e : -EAGAIN;
     }
     ++g_k.alive;
@@ -235,33 +247,36 @@ int chm_task_spawn(chm_tid_t* out, void (*entry)(void*), void* arg, const chm_ta
 }
 
 void chm_task_exit(void) {
-    port::irq_disable();
-    Tcb* cur = g_k.current;
-    if (!cur) {  // not a task: nothing sensible to end
-        port::irq_restore();
-        return;
-    }
-    task_end_locked(cur);
-    if (g_k.zombie) {  // not yet reaped (we ran without returning from a switch)
-        task_free_stack(g_k.zombie);
-    }
-    g_k.zombie = cur;
-    schedule_locked();
-    __builtin_unreachable();
+    if (!g_k.current) return;  // not a task: nothing sensible to end
+    task_end_current(CHM_TASK_EXITED, 0);
 }
 
 int chm_task_destroy(chm_tid_t id) {
+    Tcb* t;
     {
         IrqGuard guard;
-        Tcb* t = tcb_lookup(id);
+        t = tcb_lookup(id);
         if (!t) return raise_or_return(-ESRCH, "chm_task_destroy");
-        if (t != g_k.current) {
-            task_end_locked(t);
-            task_free_stack(t);
-            return 0;
+        if (t == g_k.current) {
+            port::irq_restore();
+            task_end_current(CHM_TASK_EXITED, 0);
+        }
+        // Off the CPU for good before its hooks run in our context: a
+        // suspended task stays off whatever wakes it meanwhile.
+        ++t->suspend_count;
+        if (t->state == TaskState::Ready) {
+            unready_locked(t);
+            t->state = TaskState::Suspended;
         }
     }
-    chm_task_exit();
+    task_run_end_hooks(t);
+    IrqGuard guard;
+    if (tid_of(t) == id && t->state != TaskState::Ended) {  // nobody ended it meanwhile
+        t->end_reason = CHM_TASK_DESTROYED;
+        task_end_locked(t);
+        task_free_stack(t);
+        reschedule_locked();  // its joiner may be more urgent than we are
+    }
     return 0;
 }
 
@@ -367,6 +382,9 @@ int chm_task_status(chm_tid_t id, chm_task_status_t* out) {
     out->worst_cycle_cpu_ns = t->worst_cycle_cpu;
     out->stack_size = t->stack_size;
     out->stack_high_water = t->stack_lo ? stack_high_water(t) : t->final_high_water;
+    out->end_reason = t->state == TaskState::Ended ? chm_task_end_reason(t->end_reason) : CHM_TASK_LIVE;
+    out->exit_status = t->exit_status;
+    out->timing_refused = t->timing_refused;
     return 0;
 }
 
