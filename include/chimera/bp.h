@@ -131,6 +131,22 @@ int chm_bp_self(void);
  * "" when none failed yet. */
 const char* chm_bp_last_error(void);
 
+/* Global error handling of IPC (chimera/err.h). A task with global handling
+ * on (chm_err_global) gets every failing remote-semaphore (chm_rsem_*),
+ * message-queue (chm_msgq_*), shared-memory (chm_shm_*) and spin-lock
+ * (chm_spin_*) call whose status means a bug or a missing resource as an
+ * error signal of module "ipc": code = the errno value (EINVAL, ENOENT,
+ * ENOTCONN, ECHRNG, EEXIST, ENAMETOOLONG, ENOMEM, ENOSPC, EMSGSIZE,
+ * EPERM, ESRCH, EBADMSG, ENOTRECOVERABLE, EBADF, EFAULT), detail
+ * = the chm_bp_last_error() message when the call left one. It is raised
+ * when the call returns, holding no backplane lock; the default handler
+ * prints one line and aborts only the task; a handler that continues makes
+ * the call return its status, as with handling off. Outcomes are never
+ * raised: -ETIMEDOUT, -EAGAIN, -EINTR, -EOWNERDEAD, -EIDRM, -EOVERFLOW,
+ * -EBUSY and -EDEADLK. Host threads (not tasks) always get the status.
+ * Returns the module's id (registered on first use) or a negative status. */
+int chm_ipc_err_module(void);
+
 enum chm_bp_slot_state {
     CHM_BP_FREE = 0, CHM_BP_JOINING = 1, CHM_BP_RUNNING = 2, CHM_BP_LEAVING = 3,
     CHM_BP_DEAD = 4, CHM_BP_RECOVERING = 5

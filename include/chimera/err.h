@@ -66,7 +66,11 @@ extern "C" {
 #define CHM_ECPU_BUS 2   /* SIGBUS */
 #define CHM_ECPU_FPE 3   /* SIGFPE: integer division by zero, FP trap */
 #define CHM_ECPU_ILL 4   /* SIGILL: an illegal instruction */
-#define CHM_ECPU_STACK 5 /* the task overflowed its stack (its guard page) */
+#define CHM_ECPU_STACK 5 /* the task overflowed its stack (its guard page), or
+                          * was preempted with too little stack left for the
+                          * preemption frame (the port's kPreemptFrameMax plus
+                          * 1 KiB for the scheduler): it is aborted instead of
+                          * faulting inside the kernel, and the RTPU runs on */
 
 /* The exit status of a fail-stopped RTPU process. */
 #define CHM_ERR_FAILSTOP_STATUS 70

@@ -28,7 +28,15 @@
  * -ENOTRECOVERABLE.
  *
  * Every call returns 0 (receive: the message length) or a negative
- * errno-style status; chm_bp_last_error() then says what was wrong. */
+ * errno-style status; chm_bp_last_error() then says what was wrong.
+ *
+ * Errors under global handling (chimera/err.h): the statuses meaning a bug
+ * or a missing resource (-EINVAL, -ENOENT, -ENOTCONN, -ECHRNG, -EEXIST,
+ * -ENAMETOOLONG, -ENOMEM, -ENOSPC, -EMSGSIZE, -EPERM, -EBADMSG,
+ * -ENOTRECOVERABLE...) are raised as error signals of module "ipc"
+ * (chm_ipc_err_module, chimera/bp.h) when a task with global handling on
+ * gets them; outcomes (-EAGAIN, -ETIMEDOUT, -EINTR, -EIDRM, -EOWNERDEAD)
+ * are only returned. */
 #ifndef CHIMERA_MSGQ_H
 #define CHIMERA_MSGQ_H
 

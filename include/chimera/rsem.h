@@ -10,7 +10,15 @@
  * backplane's recovery), and a V already handed to it is passed on.
  *
  * Every call returns 0 or a negative errno-style status; chm_bp_last_error()
- * says what was wrong in words. */
+ * says what was wrong in words.
+ *
+ * Errors under global handling (chimera/err.h): the statuses meaning a bug
+ * or a missing resource (-EINVAL, -ENOENT, -ENOTCONN, -ECHRNG, -EEXIST,
+ * -ENAMETOOLONG, -ENOMEM, -ENOSPC, -EMSGSIZE, -EPERM, -EBADMSG,
+ * -ENOTRECOVERABLE...) are raised as error signals of module "ipc"
+ * (chm_ipc_err_module, chimera/bp.h) when a task with global handling on
+ * gets them; outcomes (-EAGAIN, -ETIMEDOUT, -EINTR, -EOWNERDEAD, -EIDRM,
+ * -EOVERFLOW) are only returned. */
 #ifndef CHIMERA_RSEM_H
 #define CHIMERA_RSEM_H
 

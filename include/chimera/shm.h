@@ -5,7 +5,15 @@
  *
  * Requires this process to be attached to a backplane (chimera/bp.h).
  * Every function returns 0 or a negative errno-style status; after an
- * error chm_bp_last_error() says what failed. */
+ * error chm_bp_last_error() says what failed.
+ *
+ * Errors under global handling (chimera/err.h): the statuses meaning a bug
+ * or a missing resource (-EINVAL, -ENOENT, -ENOTCONN, -ECHRNG, -EEXIST,
+ * -ENAMETOOLONG, -ENOMEM, -ENOSPC, -EMSGSIZE, -EPERM, -EBADMSG,
+ * -ENOTRECOVERABLE...) are raised as error signals of module "ipc"
+ * (chm_ipc_err_module, chimera/bp.h) when a task with global handling on
+ * gets them; -EDEADLK (the registry lock held past its bound by a live
+ * process) is only returned. */
 #ifndef CHIMERA_SHM_H
 #define CHIMERA_SHM_H
 

@@ -10,7 +10,13 @@
  * locker takes the lock over and is told so (-EOWNERDEAD), so it can
  * repair what the lock protects.
  *
- * The caller's process must be attached to a backplane (chimera/bp.h). */
+ * The caller's process must be attached to a backplane (chimera/bp.h).
+ *
+ * Errors under global handling (chimera/err.h): -EINVAL, -ENOTCONN and
+ * -EPERM (unlocking a lock this caller does not hold) are raised as error
+ * signals of module "ipc" (chm_ipc_err_module, chimera/bp.h) when a task
+ * with global handling on gets them; the outcomes -ETIMEDOUT, -EBUSY and
+ * -EOWNERDEAD are only returned. */
 #ifndef CHIMERA_SPIN_H
 #define CHIMERA_SPIN_H
 

@@ -133,6 +133,64 @@ TEST(ErrFaults, StackOverflowAbortsOnlyTheTask) {
     expect_task_aborted(Fault::Overflow, CHM_ECPU_STACK, "stack overflow");
 }
 
+// A task preempted near its guard page (issue 15 item 6): the timer's
+// trampoline frame would not fit above the guard, so the task is aborted
+// as a stack overflow before it is redirected, instead of faulting inside
+// the trampoline with the mask held (a fail-stop of the whole RTPU). The
+// task recurses until it is within kNearGuard bytes of its stack's bottom
+// and spins there while a 1 ms periodic sibling preempts it.
+// kNearGuard is below every port's need (kPreemptFrameMax + 1 KiB: 1216
+// bytes on m68k) and, on x86-64, below the trampoline's own frame (red
+// zone, registers and an XSAVE area of 576 bytes or more).
+constexpr uintptr_t kNearGuard = 768;
+uintptr_t g_stack_bottom = 0;
+volatile bool g_spin = true;
+
+__attribute__((noinline)) void spin_near_guard() {
+    while (g_spin) g_sink = g_sink + 1;  // no call: no kernel entry down here
+}
+
+__attribute__((noinline)) int descend(int n) {
+    volatile char pad[48];
+    pad[0] = char(n);
+    if (reinterpret_cast<uintptr_t>(&pad[0]) - g_stack_bottom < kNearGuard) {
+        spin_near_guard();
+        return pad[0];
+    }
+    return descend(n + 1) + pad[0];
+}
+
+constexpr size_t kDeepStack = 16 * 1024;
+void near_guard(void*) {
+    ASSERT_EQ(chm_sem_p(&g_lock), 0);
+    chm_task_pause_until(chm_time_now() + 5 * kMs);  // the waiter queues up
+    // Stacks are whole pages (task/stack.cpp): the top is the page boundary
+    // just above this frame, the bottom kDeepStack below it.
+    volatile char here = 0;
+    const uintptr_t page = uintptr_t(sysconf(_SC_PAGESIZE));
+    const uintptr_t top = (reinterpret_cast<uintptr_t>(&here) + page - 1) & ~(page - 1);
+    g_stack_bottom = top - kDeepStack;
+    g_sink = descend(here);
+    g_after_fault = true;
+}
+
+TEST(ErrFaults, PreemptionNearTheGuardPageAbortsOnlyTheTask) {
+    const ChildResult r = run_child([] { return run_rtpu_with(near_guard, kDeepStack); }, 60);
+    ASSERT_FALSE(r.timed_out) << r.err;
+    ASSERT_TRUE(r.exited) << "killed by signal " << r.status << "\n" << r.err;
+    EXPECT_EQ(r.status, 0) << r.err;  // not CHM_ERR_FAILSTOP_STATUS
+    EXPECT_EQ(count_lines(r.err, "chimera: RTPU"), 1) << r.err;
+    EXPECT_NE(r.err.find("task faulter (id "), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find(": cpu error " + std::to_string(CHM_ECPU_STACK) + " (stack overflow)"),
+              std::string::npos)
+        << r.err;
+    EXPECT_NE(r.err.find("preempted with no room left on its stack"), std::string::npos) << r.err;
+    // The sibling ran all its cycles; the waiter got the lock the task held.
+    EXPECT_NE(r.err.find("RESULT sibling=50 waiter=" + std::to_string(-EOWNERDEAD) + " after=0"),
+              std::string::npos)
+        << r.err;
+}
+
 // A handler may take the task back to a mark after a fault; the task lives on.
 chm_err_action_t back(const chm_err_info_t*, void*) { return CHM_ERR_TO_MARK; }
 void recovers(void*) {

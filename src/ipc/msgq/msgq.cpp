@@ -9,6 +9,7 @@
 
 #include "chimera/bp.h"
 #include "chimera/msgq.h"
+#include "ipc/err/report.hpp"
 #include "ipc/msgq/msgq.hpp"
 
 using namespace chm::bp;
@@ -59,7 +60,7 @@ void chm_msgq_attr_init(chm_msgq_attr_t* attr) {
     attr->max_waiters = 0;
 }
 
-int chm_msgq_create(const char* name, const chm_msgq_attr_t* attr_in, int where, chm_msgq_t** out) {
+static int msgq_create_impl(const char* name, const chm_msgq_attr_t* attr_in, int where, chm_msgq_t** out) {
     chm_msgq_attr_t attr;
     if (attr_in) attr = *attr_in;
     else chm_msgq_attr_init(&attr);
@@ -128,7 +129,7 @@ int chm_msgq_create(const char* name, const chm_msgq_attr_t* attr_in, int where,
     return r;
 }
 
-int chm_msgq_open(const char* name, chm_msgq_t** out) {
+static int msgq_open_impl(const char* name, chm_msgq_t** out) {
     if (!name || !out) return set_error("chm_msgq_open: NULL name or out"), -EINVAL;
     Attachment* a = need_attachment("chm_msgq_open");
     if (!a) return -ENOTCONN;
@@ -146,7 +147,7 @@ int chm_msgq_open(const char* name, chm_msgq_t** out) {
     return 0;
 }
 
-int chm_msgq_close(chm_msgq_t* q) {
+static int msgq_close_impl(chm_msgq_t* q) {
     Attachment* a = need_attachment("chm_msgq_close");
     if (!a) return -ENOTCONN;
     const char* p = reinterpret_cast<const char*>(q);
@@ -160,7 +161,7 @@ int chm_msgq_close(chm_msgq_t* q) {
     return r;
 }
 
-int chm_msgq_destroy(const char* name) {
+static int msgq_destroy_impl(const char* name) {
     if (!name) return set_error("chm_msgq_destroy: NULL name"), -EINVAL;
     Attachment* a = need_attachment("chm_msgq_destroy");
     if (!a) return -ENOTCONN;
@@ -194,7 +195,7 @@ int chm_msgq_destroy(const char* name) {
     return r;
 }
 
-int chm_msgq_info(chm_msgq_t* h, chm_msgq_info_t* out) {
+static int msgq_info_impl(chm_msgq_t* h, chm_msgq_info_t* out) {
     Attachment* a = need_attachment("chm_msgq_info");
     if (!a) return -ENOTCONN;
     const char* p = reinterpret_cast<const char*>(h);
@@ -217,6 +218,27 @@ int chm_msgq_info(chm_msgq_t* h, chm_msgq_info_t* out) {
     out->broken = int(q->broken.load(R));
     out->destroyed = int(q->destroyed.load(R));
     return 0;
+}
+
+}  // extern "C"
+
+// The public calls: each leaves through ipc::leave, which turns a failure
+// into an error signal of module "ipc" under global handling
+// (ipc/err/report.hpp). Every lock the call took is released by then.
+extern "C" {
+
+int chm_msgq_create(const char* name, const chm_msgq_attr_t* attr, int where, chm_msgq_t** out) {
+    return chm::ipc::leave(msgq_create_impl(name, attr, where, out), "chm_msgq_create");
+}
+int chm_msgq_open(const char* name, chm_msgq_t** out) {
+    return chm::ipc::leave(msgq_open_impl(name, out), "chm_msgq_open");
+}
+int chm_msgq_close(chm_msgq_t* q) { return chm::ipc::leave(msgq_close_impl(q), "chm_msgq_close"); }
+int chm_msgq_destroy(const char* name) {
+    return chm::ipc::leave(msgq_destroy_impl(name), "chm_msgq_destroy");
+}
+int chm_msgq_info(chm_msgq_t* q, chm_msgq_info_t* out) {
+    return chm::ipc::leave(msgq_info_impl(q, out), "chm_msgq_info");
 }
 
 }  // extern "C"

@@ -10,6 +10,7 @@
 #include "chimera/bp.h"
 #include "chimera/kernel.h"
 #include "chimera/task.h"
+#include "ipc/err/report.hpp"
 #include "ipc/msgq/msgq.hpp"
 #include "ipc/wake/wake.hpp"
 #include "kernel/sync/remote_wait.hpp"
@@ -382,32 +383,39 @@ void purge_token_locked(const bp::View& v, QueueHeader* q, std::uint32_t token, 
 
 using namespace chm::ipc::msgq;
 
+// The public calls leave through ipc::leave: a failure becomes an error
+// signal of module "ipc" under global handling (ipc/err/report.hpp), once
+// send_common / recv_common have released the queue's lock.
 extern "C" {
 
 int chm_msgq_send(chm_msgq_t* q, std::uint32_t type, std::uint32_t prio, const void* data, size_t len) {
-    return send_common("chm_msgq_send", q, type, prio, data, len, -1);
+    return chm::ipc::leave(send_common("chm_msgq_send", q, type, prio, data, len, -1), "chm_msgq_send");
 }
 
 int chm_msgq_send_timed(chm_msgq_t* q, std::uint32_t type, std::uint32_t prio, const void* data, size_t len,
                         std::int64_t timeout_ns) {
-    return send_common("chm_msgq_send_timed", q, type, prio, data, len, timeout_ns < 0 ? -1 : timeout_ns);
+    return chm::ipc::leave(
+        send_common("chm_msgq_send_timed", q, type, prio, data, len, timeout_ns < 0 ? -1 : timeout_ns),
+        "chm_msgq_send_timed");
 }
 
 int chm_msgq_try_send(chm_msgq_t* q, std::uint32_t type, std::uint32_t prio, const void* data, size_t len) {
-    return send_common("chm_msgq_try_send", q, type, prio, data, len, 0);
+    return chm::ipc::leave(send_common("chm_msgq_try_send", q, type, prio, data, len, 0), "chm_msgq_try_send");
 }
 
 int chm_msgq_receive(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info) {
-    return recv_common("chm_msgq_receive", q, buf, size, info, -1);
+    return chm::ipc::leave(recv_common("chm_msgq_receive", q, buf, size, info, -1), "chm_msgq_receive");
 }
 
 int chm_msgq_receive_timed(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info,
                            std::int64_t timeout_ns) {
-    return recv_common("chm_msgq_receive_timed", q, buf, size, info, timeout_ns < 0 ? -1 : timeout_ns);
+    return chm::ipc::leave(
+        recv_common("chm_msgq_receive_timed", q, buf, size, info, timeout_ns < 0 ? -1 : timeout_ns),
+        "chm_msgq_receive_timed");
 }
 
 int chm_msgq_try_receive(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info) {
-    return recv_common("chm_msgq_try_receive", q, buf, size, info, 0);
+    return chm::ipc::leave(recv_common("chm_msgq_try_receive", q, buf, size, info, 0), "chm_msgq_try_receive");
 }
 
 }  // extern "C"

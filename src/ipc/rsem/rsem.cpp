@@ -14,6 +14,7 @@
 #include "chimera/task.h"
 #include "ipc/backplane/backplane.hpp"
 #include "ipc/wake/wake.hpp"
+#include "ipc/err/report.hpp"
 #include "kernel/sync/remote_wait.hpp"
 
 using namespace chm::bp;
@@ -230,8 +231,8 @@ using namespace chm::ipc;
 
 extern "C" {
 
-int chm_rsem_create(const char* name, enum chm_sem_kind kind, uint32_t initial, int where,
-                    chm_rsem_t** out) {
+static int rsem_create_impl(const char* name, enum chm_sem_kind kind, uint32_t initial, int where,
+                            chm_rsem_t** out) {
     if (!name || !out || (kind != CHM_SEM_BINARY && kind != CHM_SEM_COUNTING) ||
         (kind == CHM_SEM_BINARY && initial > 1)) {
         set_error("chm_rsem_create: NULL name or out, unknown kind, or a binary count above 1");
@@ -275,7 +276,7 @@ int chm_rsem_create(const char* name, enum chm_sem_kind kind, uint32_t initial, 
     return r;
 }
 
-int chm_rsem_open(const char* name, chm_rsem_t** out) {
+static int rsem_open_impl(const char* name, chm_rsem_t** out) {
     if (!name || !out) return set_error("chm_rsem_open: NULL name or out"), -EINVAL;
     Attachment* a = current();
     if (!a) return set_error("chm_rsem_open: not attached to a backplane"), -ENOTCONN;
@@ -291,7 +292,7 @@ int chm_rsem_open(const char* name, chm_rsem_t** out) {
     return 0;
 }
 
-int chm_rsem_p_timed(chm_rsem_t* h, int64_t timeout_ns) {
+static int rsem_p_timed_impl(chm_rsem_t* h, int64_t timeout_ns) {
     Rsem* s = from_handle(h);
     if (!s) return set_error("chm_rsem_p: not a remote semaphore handle"), -EINVAL;
     Attachment* a = current();
@@ -360,10 +361,7 @@ int chm_rsem_p_timed(chm_rsem_t* h, int64_t timeout_ns) {
     return r;
 }
 
-int chm_rsem_p(chm_rsem_t* sem) { return chm_rsem_p_timed(sem, -1); }
-int chm_rsem_try_p(chm_rsem_t* sem) { return chm_rsem_p_timed(sem, 0); }
-
-int chm_rsem_v(chm_rsem_t* h) {
+static int rsem_v_impl(chm_rsem_t* h) {
     Rsem* s = from_handle(h);
     if (!s) return set_error("chm_rsem_v: not a remote semaphore handle"), -EINVAL;
     if (int r = lock(s)) return r;
@@ -381,19 +379,19 @@ int chm_rsem_v(chm_rsem_t* h) {
     return r;
 }
 
-int chm_rsem_value(chm_rsem_t* h) {
+static int rsem_value_impl(chm_rsem_t* h) {
     Rsem* s = from_handle(h);
     if (!s) return -EINVAL;
     const std::uint32_t c = s->count.load();
     return c > INT_MAX ? INT_MAX : int(c);
 }
 
-int chm_rsem_waiting(chm_rsem_t* h) {
+static int rsem_waiting_impl(chm_rsem_t* h) {
     Rsem* s = from_handle(h);
     return s ? int(s->nwaiting.load()) : -EINVAL;
 }
 
-int chm_rsem_close(chm_rsem_t* h) {
+static int rsem_close_impl(chm_rsem_t* h) {
     Rsem* s = from_handle(h);
     if (!s) return set_error("chm_rsem_close: not a remote semaphore handle"), -EINVAL;
     Attachment* a = current();
@@ -406,7 +404,7 @@ int chm_rsem_close(chm_rsem_t* h) {
     return 0;
 }
 
-int chm_rsem_destroy(const char* name) {
+static int rsem_destroy_impl(const char* name) {
     if (!name) return set_error("chm_rsem_destroy: NULL name"), -EINVAL;
     Attachment* a = current();
     if (!a) return -ENOTCONN;
@@ -418,5 +416,30 @@ int chm_rsem_destroy(const char* name) {
     if (i < 0) return set_error("chm_rsem_destroy: no remote semaphore \"%s\"", name), -ENOENT;
     return 0;
 }
+
+}  // extern "C"
+
+// The public calls: each leaves through ipc::leave, which turns a failure
+// into an error signal of module "ipc" under global handling
+// (ipc/err/report.hpp). Every lock the call took is released by then.
+extern "C" {
+
+int chm_rsem_create(const char* name, enum chm_sem_kind kind, uint32_t initial, int where,
+                    chm_rsem_t** out) {
+    return chm::ipc::leave(rsem_create_impl(name, kind, initial, where, out), "chm_rsem_create");
+}
+int chm_rsem_open(const char* name, chm_rsem_t** out) {
+    return chm::ipc::leave(rsem_open_impl(name, out), "chm_rsem_open");
+}
+int chm_rsem_p_timed(chm_rsem_t* sem, int64_t timeout_ns) {
+    return chm::ipc::leave(rsem_p_timed_impl(sem, timeout_ns), "chm_rsem_p_timed");
+}
+int chm_rsem_p(chm_rsem_t* sem) { return chm::ipc::leave(rsem_p_timed_impl(sem, -1), "chm_rsem_p"); }
+int chm_rsem_try_p(chm_rsem_t* sem) { return chm::ipc::leave(rsem_p_timed_impl(sem, 0), "chm_rsem_try_p"); }
+int chm_rsem_v(chm_rsem_t* sem) { return chm::ipc::leave(rsem_v_impl(sem), "chm_rsem_v"); }
+int chm_rsem_value(chm_rsem_t* sem) { return chm::ipc::leave(rsem_value_impl(sem), "chm_rsem_value"); }
+int chm_rsem_waiting(chm_rsem_t* sem) { return chm::ipc::leave(rsem_waiting_impl(sem), "chm_rsem_waiting"); }
+int chm_rsem_close(chm_rsem_t* sem) { return chm::ipc::leave(rsem_close_impl(sem), "chm_rsem_close"); }
+int chm_rsem_destroy(const char* name) { return chm::ipc::leave(rsem_destroy_impl(name), "chm_rsem_destroy"); }
 
 }  // extern "C"

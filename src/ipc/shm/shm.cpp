@@ -9,6 +9,7 @@
 #include "chimera/bp.h"
 #include "chimera/shm.h"
 #include "ipc/backplane/backplane.hpp"
+#include "ipc/err/report.hpp"
 
 using namespace chm::bp;
 
@@ -30,7 +31,7 @@ int lock_registry(Attachment* a) {
 
 extern "C" {
 
-int chm_shm_create(const char* name, size_t size, int where, void** out) {
+static int shm_create_impl(const char* name, size_t size, int where, void** out) {
     if (!name || !out || size == 0 || std::uint64_t(size) >= (std::uint64_t(1) << 32) - 4096) {
         set_error("chm_shm_create: NULL name or out, or size %zu out of range", size);
         return -EINVAL;
@@ -60,7 +61,7 @@ int chm_shm_create(const char* name, size_t size, int where, void** out) {
     return r;
 }
 
-int chm_shm_attach(const char* name, void** out, size_t* size) {
+static int shm_attach_impl(const char* name, void** out, size_t* size) {
     if (!name || !out) return set_error("chm_shm_attach: NULL name or out"), -EINVAL;
     Attachment* a = need_attachment();
     if (!a) return -ENOTCONN;
@@ -78,7 +79,7 @@ int chm_shm_attach(const char* name, void** out, size_t* size) {
     return 0;
 }
 
-int chm_shm_detach(void* addr) {
+static int shm_detach_impl(void* addr) {
     Attachment* a = need_attachment();
     if (!a) return -ENOTCONN;
     const char* p = static_cast<const char*>(addr);
@@ -92,7 +93,7 @@ int chm_shm_detach(void* addr) {
     return r;
 }
 
-int chm_shm_destroy(const char* name) {
+static int shm_destroy_impl(const char* name) {
     if (!name) return set_error("chm_shm_destroy: NULL name"), -EINVAL;
     Attachment* a = need_attachment();
     if (!a) return -ENOTCONN;
@@ -103,6 +104,24 @@ int chm_shm_destroy(const char* name) {
     registry_unlock(*a);
     if (i < 0) return set_error("chm_shm_destroy: no shared memory segment \"%s\"", name), -ENOENT;
     return 0;
+}
+
+}  // extern "C"
+
+// The public calls: each leaves through ipc::leave, which turns a failure
+// into an error signal of module "ipc" under global handling
+// (ipc/err/report.hpp). Every lock the call took is released by then.
+extern "C" {
+
+int chm_shm_create(const char* name, size_t size, int where, void** out) {
+    return chm::ipc::leave(shm_create_impl(name, size, where, out), "chm_shm_create");
+}
+int chm_shm_attach(const char* name, void** out, size_t* size) {
+    return chm::ipc::leave(shm_attach_impl(name, out, size), "chm_shm_attach");
+}
+int chm_shm_detach(void* addr) { return chm::ipc::leave(shm_detach_impl(addr), "chm_shm_detach"); }
+int chm_shm_destroy(const char* name) {
+    return chm::ipc::leave(shm_destroy_impl(name), "chm_shm_destroy");
 }
 
 }  // extern "C"

@@ -7,6 +7,7 @@
 #include "chimera/bp.h"
 #include "chimera/spin.h"
 #include "ipc/backplane/backplane.hpp"
+#include "ipc/err/report.hpp"
 
 using namespace chm::bp;
 
@@ -24,11 +25,16 @@ Lock* as_lock(chm_spin_t* l) {
 
 }  // namespace
 
+// Each public call leaves through ipc::leave: a failure becomes an error
+// signal of module "ipc" under global handling (ipc/err/report.hpp).
+// chm_spin_lock's -ETIMEDOUT and -EOWNERDEAD, and trylock's -EBUSY, are
+// outcomes and never raise; unlocking a lock one does not hold (-EPERM)
+// is a bug and does.
 extern "C" {
 
 int chm_spin_init(chm_spin_t* lock) {
     Lock* l = as_lock(lock);
-    if (!l) return -EINVAL;
+    if (!l) return chm::ipc::leave(-EINVAL, "chm_spin_init");
     l->owner_task.store(0, std::memory_order_relaxed);
     l->dirty.store(0, std::memory_order_relaxed);
     l->reserved = 0;
@@ -38,30 +44,30 @@ int chm_spin_init(chm_spin_t* lock) {
 
 int chm_spin_lock(chm_spin_t* lock, uint64_t poll_interval_ns, uint64_t timeout_ns) {
     Lock* l = as_lock(lock);
-    if (!l) return -EINVAL;
+    if (!l) return chm::ipc::leave(-EINVAL, "chm_spin_lock");
     const Attachment* a = current();
-    if (!a) return -ENOTCONN;
+    if (!a) return chm::ipc::leave(-ENOTCONN, "chm_spin_lock");
     if (timeout_ns == 0) {
         const int r = lock_try(*a, l, a->token);
-        return r == -EBUSY ? -ETIMEDOUT : r;
+        return chm::ipc::leave(r == -EBUSY ? -ETIMEDOUT : r, "chm_spin_lock");
     }
-    return lock_acquire(*a, l, a->token, poll_interval_ns, timeout_ns);
+    return chm::ipc::leave(lock_acquire(*a, l, a->token, poll_interval_ns, timeout_ns), "chm_spin_lock");
 }
 
 int chm_spin_trylock(chm_spin_t* lock) {
     Lock* l = as_lock(lock);
-    if (!l) return -EINVAL;
+    if (!l) return chm::ipc::leave(-EINVAL, "chm_spin_trylock");
     const Attachment* a = current();
-    if (!a) return -ENOTCONN;
-    return lock_try(*a, l, a->token);
+    if (!a) return chm::ipc::leave(-ENOTCONN, "chm_spin_trylock");
+    return chm::ipc::leave(lock_try(*a, l, a->token), "chm_spin_trylock");
 }
 
 int chm_spin_unlock(chm_spin_t* lock) {
     Lock* l = as_lock(lock);
-    if (!l) return -EINVAL;
+    if (!l) return chm::ipc::leave(-EINVAL, "chm_spin_unlock");
     const Attachment* a = current();
-    if (!a) return -ENOTCONN;
-    if (l->token.load(std::memory_order_relaxed) != a->token) return -EPERM;
+    if (!a) return chm::ipc::leave(-ENOTCONN, "chm_spin_unlock");
+    if (l->token.load(std::memory_order_relaxed) != a->token) return chm::ipc::leave(-EPERM, "chm_spin_unlock");
     lock_release(l);
     return 0;
 }

@@ -24,6 +24,13 @@ namespace {
 // Room the entry needs on a task's own stack (the default handler's line,
 // a user handler); with less left it runs on a fault stack.
 constexpr std::uintptr_t kEntryRoom = 4096;
+// Room the preemption hook needs on the task's stack above the port's
+// trampoline frame (kPreemptFrameMax): reschedule_locked and the switch
+// frame, a few hundred bytes; a user scheduler's pick runs there too.
+constexpr std::uintptr_t kPreemptHookRoom = 1024;
+// The free-list link and the canary at the bottom of every task stack
+// (task/stack.cpp): a preemption frame must not overwrite them either.
+constexpr std::uintptr_t kStackBottomRoom = 16;
 constexpr int kFaultStacks = 4;
 constexpr std::size_t kFaultStackSize = 32 * 1024;
 
@@ -118,7 +125,9 @@ void fault_entry() {
     chm_err_info_t info{};
     info.module = CHM_ERR_CPU;
     info.code = p.code;
-    info.detail = p.code == CHM_ECPU_STACK ? "the task overflowed its stack" : cpu_detail(p.f);
+    info.detail = p.f.no_room                 ? "preempted with no room left on its stack"
+                  : p.code == CHM_ECPU_STACK ? "the task overflowed its stack"
+                                             : cpu_detail(p.f);
     info.flags = CHM_ERR_FATAL;
     info.addr = p.f.addr;
     info.pc = p.f.pc;
@@ -136,7 +145,7 @@ void on_fault(const port::FaultInfo& f, void* ucontext) {
     const auto lo = reinterpret_cast<std::uintptr_t>(cur->stack_lo);
     const std::uintptr_t hi = lo + cur->stack_size;
     const bool guard_hit = f.signo == SIGSEGV && f.addr < lo && f.addr + g_page >= lo;
-    if (guard_hit || f.sp < lo || f.sp > hi) code = CHM_ECPU_STACK;
+    if (guard_hit || f.no_room || f.sp < lo || f.sp > hi) code = CHM_ECPU_STACK;
     std::uintptr_t sp = 0;  // 0: on the task's own stack, below the fault
     bool on_fault_stack = false;
     if (code == CHM_ECPU_STACK || f.sp < lo + kEntryRoom) {
@@ -155,6 +164,26 @@ void on_fault(const port::FaultInfo& f, void* ucontext) {
     port::g_irq.nest = 1;  // released by fault_entry, as the preemption hook does
     __atomic_signal_fence(__ATOMIC_SEQ_CST);
     port::redirect_to_call_from_signal(ucontext, fault_entry, sp);
+}
+
+// The port's check before a preemption (chm_port_preempt_floor_hook):
+// the lowest address the trampoline frame and the hook may reach on the
+// stack the running task is on, its own or (inside an error handler after
+// a fault) its fault stack. A stack pointer already inside the guard page
+// below counts as that stack (no room at all). 0 (no check) outside any
+// task and on a stack the kernel did not give out.
+std::uintptr_t preempt_floor(std::uintptr_t sp) {
+    const Tcb* cur = g_k.current;
+    if (!cur || !cur->stack_lo) return 0;
+    const auto lo = reinterpret_cast<std::uintptr_t>(cur->stack_lo);
+    if (sp + g_page >= lo && sp <= lo + cur->stack_size)
+        return lo + kStackBottomRoom + kPreemptHookRoom;
+    for (const auto& x : g_stacks) {
+        const auto flo = reinterpret_cast<std::uintptr_t>(x.lo);
+        if (x.owner == cur && sp + g_page >= flo && sp <= flo + kFaultStackSize)
+            return flo + kPreemptHookRoom;
+    }
+    return 0;
 }
 
 }  // namespace
@@ -184,9 +213,14 @@ int err_kernel_init() {
         mprotect(m, g_page, PROT_NONE);
         x.lo = static_cast<unsigned char*>(m) + g_page;
     }
-    return port::fault_init(on_fault);
+    if (int e = port::fault_init(on_fault)) return e;
+    port::chm_port_preempt_floor_hook = preempt_floor;
+    return 0;
 }
 
-void err_kernel_fini() { port::fault_fini(); }
+void err_kernel_fini() {
+    port::chm_port_preempt_floor_hook = nullptr;
+    port::fault_fini();
+}
 
 }  // namespace chm::kernel

@@ -19,6 +19,10 @@ struct FaultInfo {
     std::uintptr_t addr;  // si_addr: the faulting address (or instruction)
     std::uintptr_t pc;    // the interrupted program counter
     std::uintptr_t sp;    // the interrupted stack pointer
+    // Not a processor fault: the timer found no room below sp for the
+    // preemption trampoline's frame (fault_no_room_from_signal). signo is
+    // SIGSEGV, code 0, addr the lowest byte the frame would have used.
+    bool no_room = false;
 };
 
 // Called in signal context on the kernel thread, on the alternate signal
@@ -38,6 +42,14 @@ int fault_init(FaultHandler handler);
 void fault_fini();
 // True on the thread that called fault_init. Any context.
 bool on_fault_thread();
+
+// Report to the fault handler, from the timer's handler (signal context on
+// the kernel thread, mask released by the caller), that the interrupted
+// task has no room on its stack for the preemption frame: FaultInfo with
+// no_room set, addr = `addr`. The handler then redirects the context (or
+// fail-stops) as for a fault. Returns false, doing nothing, when no handler
+// is installed or the caller is not the fault thread.
+bool fault_no_room_from_signal(void* ucontext, std::uintptr_t addr);
 
 // Rewrite `ucontext` so that, after the handler returns, the interrupted
 // thread calls `fn()` (which never returns) with the stack pointer at

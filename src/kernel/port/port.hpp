@@ -242,10 +242,24 @@ extern "C" __attribute__((visibility("hidden"))) PreemptHook chm_port_preempt_ho
 //
 // Pre:  signal context on the kernel thread; the interrupted PC is
 //       preemptible (see below); the interrupted stack has room for the
-//       trampoline's frame (kPreemptFrameMax bytes) below its stack pointer
-//       and the ABI's red zone.
+//       trampoline's frame (kPreemptFrameMax bytes, the ABI's red zone
+//       included) below its stack pointer: the timer handler checks this
+//       against chm_port_preempt_floor_hook before it redirects.
 // Post: only the ucontext is modified; nothing runs yet.
 void redirect_to_preempt_from_signal(void* ucontext);
+
+// Where the trampoline's frame may go: called by the timer handler (signal
+// context, mask held) with the interrupted stack pointer before it
+// redirects; returns the lowest address the frame and the hook's own calls
+// may reach on that stack (0: a stack the kernel does not know, no check).
+// When sp - kPreemptFrameMax falls below it, the task is not redirected:
+// the handler reports it to the fault handler as a stack overflow
+// (fault_no_room_from_signal, fault.hpp), so a task preempted near its
+// guard page is aborted instead of faulting inside the trampoline with the
+// mask held, which would fail-stop the whole RTPU. Installed by the kernel
+// (err/fault.cpp).
+using PreemptFloorHook = std::uintptr_t (*)(std::uintptr_t sp);
+extern "C" __attribute__((visibility("hidden"))) PreemptFloorHook chm_port_preempt_floor_hook;
 
 // The interrupted program counter and stack pointer of a signal's ucontext.
 std::uintptr_t interrupted_pc_from_signal(const void* ucontext);

@@ -62,6 +62,14 @@ void on_fault(int sig, siginfo_t* si, void* uc) {
 
 bool on_fault_thread() { return t_fault_thread; }
 
+bool fault_no_room_from_signal(void* ucontext, std::uintptr_t addr) {
+    if (!t_fault_thread || !g_handler) return false;
+    FaultInfo f{SIGSEGV, 0, addr, interrupted_pc_from_signal(ucontext),
+                interrupted_sp_from_signal(ucontext), true};
+    g_handler(f, ucontext);
+    return true;
+}
+
 int fault_init(FaultHandler handler) {
     stack_t cur{};
     if (sigaltstack(nullptr, &cur) != 0) return -errno;

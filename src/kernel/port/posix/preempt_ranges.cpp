@@ -11,6 +11,7 @@
 // Hidden: the trampolines reach it PC-relative, also inside libchimera.so.
 extern "C" {
 __attribute__((visibility("hidden"))) chm::port::PreemptHook chm_port_preempt_hook = nullptr;
+__attribute__((visibility("hidden"))) chm::port::PreemptFloorHook chm_port_preempt_floor_hook = nullptr;
 }
 
 namespace chm::port {

@@ -48,12 +48,31 @@ void on_timer(int, siginfo_t*, void* ucontext) {
 #if CHM_PORT_HAS_PREEMPTION
             if (chm_port_preempt_hook &&
                 preemptible_pc_from_signal(interrupted_pc_from_signal(ucontext))) {
-                // The task calls the hook itself after sigreturn; the mask
-                // stays held until the kernel releases it there.
-                redirect_to_preempt_from_signal(ucontext);
-                g_defer_streak = 0;
-                errno = saved_errno;
-                return;
+                // The trampoline's frame goes below the interrupted sp: a
+                // task too close to its guard page would fault inside it
+                // with the mask held (a fail-stop of the whole RTPU).
+                // Such a task is aborted as a stack overflow instead.
+                const std::uintptr_t sp = interrupted_sp_from_signal(ucontext);
+                const std::uintptr_t floor =
+                    chm_port_preempt_floor_hook ? chm_port_preempt_floor_hook(sp) : 0;
+                if (floor != 0 && (sp < floor || sp - floor < kPreemptFrameMax)) {
+                    __atomic_signal_fence(__ATOMIC_SEQ_CST);
+                    g_irq.nest = 0;  // as for a fault: the fault handler takes the mask
+                    g_defer_streak = 0;
+                    if (fault_no_room_from_signal(ucontext, sp - kPreemptFrameMax)) {
+                        errno = saved_errno;
+                        return;
+                    }
+                    g_irq.nest = 1;  // no fault handler: defer, as in foreign code
+                    __atomic_signal_fence(__ATOMIC_SEQ_CST);
+                } else {
+                    // The task calls the hook itself after sigreturn; the
+                    // mask stays held until the kernel releases it there.
+                    redirect_to_preempt_from_signal(ucontext);
+                    g_defer_streak = 0;
+                    errno = saved_errno;
+                    return;
+                }
             }
 #else
             (void)ucontext;
