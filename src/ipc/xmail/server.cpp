@@ -225,8 +225,8 @@ void serve_all() {
     bp::RingHeader* ring = g_s.ring;
     reclaim(*a, ring);
     std::uint32_t k = 0;
-    for (std::uint32_t i = 0; i < ring->capacity; ++i) {
-        const std::uint32_t st = record_at(ring, i)->state.load(Acq);
+    for (std::uint32_t i = 0; i < ring_capacity(*a); ++i) {
+        const std::uint32_t st = record_at(*a, ring, i)->state.load(Acq);
         if (phase_of(st) == kPosted) g_s.posted[k++] = {seq_of(st), i};
     }
     // Wrap-safe order of 28-bit sequence numbers.
@@ -234,7 +234,7 @@ void serve_all() {
         return std::int32_t((x.seq - y.seq) << 4) < 0;
     });
     for (std::uint32_t j = 0; j < k; ++j) {
-        serve(record_at(ring, g_s.posted[j].index), g_s.posted[j].seq);
+        serve(record_at(*a, ring, g_s.posted[j].index), g_s.posted[j].seq);
         if (g_s.stop_after) {
             g_s.stop_after = false;
             chm_kernel_stop(g_s.stop_code);  // does not return
@@ -258,15 +258,15 @@ int server_start(int priority) {
     if (!a || a->kind != bp::SlotKind::Rtpu) return -ENOTCONN;
     if (g_s.started) return -EBUSY;
     bp::RingHeader* ring = a->ring(a->slot);
-    if (ring->record_size < kRecordMin) return -EMSGSIZE;
+    if (ring_record_size(*a) < kRecordMin) return -EMSGSIZE;
     chm_free(g_s.req);  // a previous start's (a kernel started again)
     chm_free(g_s.rep);
     chm_free(g_s.posted);
     g_s = Server{};
-    g_s.room = ring->record_size - sizeof(Record);
+    g_s.room = ring_record_size(*a) - sizeof(Record);
     g_s.req = static_cast<char*>(chm_malloc(g_s.room));
     g_s.rep = static_cast<char*>(chm_malloc(g_s.room));
-    g_s.posted = static_cast<Server::Posted*>(chm_malloc(sizeof(Server::Posted) * ring->capacity));
+    g_s.posted = static_cast<Server::Posted*>(chm_malloc(sizeof(Server::Posted) * ring_capacity(*a)));
     auto undo = [] {
         chm_free(g_s.req);
         chm_free(g_s.rep);
@@ -281,8 +281,8 @@ int server_start(int priority) {
     // What a dead predecessor of this slot left: requests it took and
     // never answered, and requests abandoned to it. Posted requests of
     // live senders stay and are served.
-    for (std::uint32_t i = 0; i < ring->capacity; ++i) {
-        Record* r = record_at(ring, i);
+    for (std::uint32_t i = 0; i < ring_capacity(*a); ++i) {
+        Record* r = record_at(*a, ring, i);
         std::uint32_t st = r->state.load(Acq);
         const Phase p = phase_of(st);
         if (p == kServing || p == kAbandoned)

@@ -132,10 +132,16 @@ int call(int rtpu, Kind kind, const void* req, std::uint32_t len, void* reply, s
 // Any process; returns the number freed.
 unsigned reclaim(const bp::View& v, bp::RingHeader* ring);
 
-// A record of a ring (index < capacity).
-inline Record* record_at(bp::RingHeader* ring, std::uint32_t i) {
+// A record of a ring (index < capacity). Capacity and record size come
+// from the process's validated layout (View::geo), never from the ring
+// header in shared memory: attach checked that the two agree, and a header
+// changed later cannot move a record outside the ring (a capacity or a
+// record size of 0 once divided by zero and read outside the map).
+inline std::uint32_t ring_capacity(const bp::View& v) { return v.geo().ring_records; }
+inline std::uint32_t ring_record_size(const bp::View& v) { return v.geo().ring_record_size; }
+inline Record* record_at(const bp::View& v, bp::RingHeader* ring, std::uint32_t i) {
     return reinterpret_cast<Record*>(reinterpret_cast<char*>(ring + 1) +
-                                     std::size_t(i) * ring->record_size);
+                                     std::size_t(i) * ring_record_size(v));
 }
 inline char* payload_of(Record* r) { return reinterpret_cast<char*>(r + 1); }
 
