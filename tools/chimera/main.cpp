@@ -189,6 +189,12 @@ int cmd_start(const Options& o, const StartPlan& p) {
         bad("--program for RTPU " + std::to_string(p.programs.size()) + " but only " + std::to_string(p.rtpus) +
             " RTPUs are started (--rtpus)");
     bool created = false;
+    // An existing file is validated before any RTPU is forked: a corrupt
+    // one is refused here, once, not by every RTPU as it joins.
+    if (access(o.backplane.c_str(), F_OK) == 0 && chm_bp_validate(o.backplane.c_str()) != 0) {
+        say("refusing %s: %s", o.backplane.c_str(), chm_bp_last_error());
+        return 1;
+    }
     if (access(o.backplane.c_str(), F_OK) != 0) {
         chm_bp_config_t cfg;
         chm_bp_config_init(&cfg);

@@ -108,6 +108,12 @@ void print_tasks(int slot) {
 }  // namespace
 
 int cmd_status(const Options& o) {
+    // The whole table and every object in it, before anything is shown:
+    // a table that fails validation is refused, naming the field.
+    if (access(o.backplane.c_str(), F_OK) == 0 && chm_bp_validate(o.backplane.c_str()) != 0) {
+        say("refusing %s: %s", o.backplane.c_str(), chm_bp_last_error());
+        return 1;
+    }
     if (attach(o)) return 1;
     chm_bp_status_t st;
     chm_bp_status(&st);

@@ -6,6 +6,7 @@
 // The handle is the queue's address in this process's mapping.
 #include <cerrno>
 #include <cstdint>
+#include <cstdio>
 #include <cstring>
 
 #include "chimera/bp.h"
@@ -168,6 +169,12 @@ int chm_msgq_create(const char* name, const chm_msgq_attr_t* attr_in, int where,
     case -ENOMEM: set_error("chm_msgq_create %s: no %u free bytes in %s", name, size, where_text(where)); break;
     case -ENOSPC: set_error("chm_msgq_create %s: the registry is full (%u entries)", name, a->geo().registry_capacity); break;
     case -ENOTRECOVERABLE: set_error("chm_msgq_create %s: %s was damaged by a process that died in it", name, where_text(where)); break;
+    case -EBADMSG: {  // a corrupt arena: its check said which field
+        char why[400];
+        std::snprintf(why, sizeof why, "%s", chm_bp_last_error());
+        set_error("chm_msgq_create %s: %s", name, why);
+        break;
+    }
     default: set_error("chm_msgq_create %s: error %d", name, r); break;
     }
     return r;

@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <cstdio>
 
+#include "chimera/bp.h"
 #include "chimera/rsem.h"
 #include "chimera/shm.h"
 #include "chimera/task.h"
@@ -323,6 +324,12 @@ int chm_rsem_create(const char* name, enum chm_sem_kind kind, uint32_t initial, 
     case -ENAMETOOLONG: set_error("chm_rsem_create: name longer than %u", kNameMax); break;
     case -ENOMEM: set_error("chm_rsem_create %s: no room in that memory", name); break;
     case -ENOSPC: set_error("chm_rsem_create %s: the registry is full", name); break;
+    case -EBADMSG: {  // a corrupt arena: its check said which field
+        char why[400];
+        std::snprintf(why, sizeof why, "%s", chm_bp_last_error());
+        set_error("chm_rsem_create %s: %s", name, why);
+        break;
+    }
     default: set_error("chm_rsem_create %s: error %d", name, r); break;
     }
     return r;

@@ -5,6 +5,7 @@
 // process; the data path is the caller's own loads and stores.
 #include <cerrno>
 #include <cstdint>
+#include <cstdio>
 
 #include "chimera/bp.h"
 #include "chimera/shm.h"
@@ -55,6 +56,12 @@ int chm_shm_create(const char* name, size_t size, int where, void** out) {
     case -ENOMEM: set_error("chm_shm_create %s: no %zu free bytes in %s", name, size, where == CHM_SHM_COMMON ? "common memory" : "that RTPU's window"); break;
     case -ENOSPC: set_error("chm_shm_create %s: the registry is full (%u entries)", name, a->geo().registry_capacity); break;
     case -ENOTRECOVERABLE: set_error("chm_shm_create %s: that memory was damaged by a process that died in it", name); break;
+    case -EBADMSG: {  // a corrupt arena: its check said which field
+        char why[400];
+        std::snprintf(why, sizeof why, "%s", chm_bp_last_error());
+        set_error("chm_shm_create %s: %s", name, why);
+        break;
+    }
     default: set_error("chm_shm_create %s: error %d", name, r); break;
     }
     return r;
