@@ -70,7 +70,7 @@ bool payload_ok(const View& v, const RegistryEntry* e, std::uint32_t i, Report& 
         r.problem("registry[%u].where is %u: neither common memory nor a slot", i, where);
         return false;
     }
-    const std::uint32_t lo = v.off_of(a), hi = lo + a->size;
+    const std::uint32_t lo = v.off_of(a), hi = lo + v.arena_size(where);  // the layout's, not the file's
     if (off < lo + sizeof(ArenaHeader) || off >= hi || size == 0 || size > hi - off) {
         r.problem("registry[%u].offset %u size %u lies outside %s [%u, %u)", i, off, size,
                   where == kWhereCommon ? "common memory" : "its RTPU window", lo, hi);
