@@ -65,26 +65,10 @@ int do_ping(char* rep, std::uint32_t* n) {
 }
 
 int do_spawn(const char* req, std::uint32_t len, char* rep, std::uint32_t* n) {
-    SpawnRequest h;
-    if (len < sizeof h) return -EINVAL;
-    std::memcpy(&h, req, sizeof h);
-    if (h.argc < 0 || h.text_len > len - sizeof h || h.text_len == 0) return -EINVAL;
-    const char* text = req + sizeof h;
-    if (text[h.text_len - 1] != 0) return -EINVAL;
-    // path, then argc strings, all inside the text.
-    const char* argv[64];
-    if (h.argc > 64) return -E2BIG;
-    const char* p = text;
-    const char* end = text + h.text_len;
-    const char* path = p;
-    p += std::strlen(p) + 1;
-    for (int i = 0; i < h.argc; ++i) {
-        if (p >= end) return -EINVAL;
-        argv[i] = p;
-        p += std::strlen(p) + 1;
-    }
+    SpawnArgs args;
+    if (int e = decode_spawn(req, len, &args)) return e;
     chm_tid_t tid = CHM_TID_NONE;
-    const int prog = chm_program_load(path, h.argc, argv, nullptr, &tid);
+    const int prog = chm_program_load(args.path, args.argc, args.argv, nullptr, &tid);
     SpawnReply out{tid, prog};
     std::memcpy(rep, &out, sizeof out);
     *n = sizeof out;
@@ -252,6 +236,28 @@ void server_main(void*) {
 }
 
 }  // namespace
+
+int decode_spawn(const char* req, std::uint32_t len, SpawnArgs* out) {
+    SpawnRequest h;
+    if (len < sizeof h) return -EINVAL;
+    std::memcpy(&h, req, sizeof h);
+    if (h.argc < 0 || h.text_len > len - sizeof h || h.text_len == 0) return -EINVAL;
+    const char* text = req + sizeof h;
+    if (text[h.text_len - 1] != 0) return -EINVAL;  // so every strlen below stops inside
+    if (h.argc > kSpawnArgsMax) return -E2BIG;
+    // path, then argc strings, all inside the text.
+    const char* p = text;
+    const char* end = text + h.text_len;
+    out->path = p;
+    p += std::strlen(p) + 1;
+    for (int i = 0; i < h.argc; ++i) {
+        if (p >= end) return -EINVAL;
+        out->argv[i] = p;
+        p += std::strlen(p) + 1;
+    }
+    out->argc = h.argc;
+    return 0;
+}
 
 int server_start(int priority) {
     bp::Attachment* a = bp::current();

@@ -149,6 +149,20 @@ void set_error(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
 
 // ------------------------------------------------------------ server side
 
+// A spawn request as the server reads it: pointers into the request.
+inline constexpr int kSpawnArgsMax = 64;
+struct SpawnArgs {
+    const char* path;
+    int argc;
+    const char* argv[kSpawnArgsMax];
+};
+// Decode a kSpawn request of `len` bytes (a copy the server owns: it may
+// hold anything a sender wrote). 0; -EINVAL shorter than its header, a
+// text length beyond the request or 0, a text not NUL-terminated, fewer
+// strings than argc says; -E2BIG more than kSpawnArgsMax arguments.
+int decode_spawn(const char* req, std::uint32_t len, SpawnArgs* out);
+
+
 // On the kernel thread of an RTPU that joined the backplane and bound its
 // kernel (ipc::wake_bind_kernel), before chm_kernel_run: free what a dead
 // predecessor left in this slot's ring, spawn the server task (`priority`)
