@@ -22,6 +22,7 @@ namespace chm::test {
 namespace {
 
 using ipc::msgq::QueueHeader;
+using W = std::atomic<std::uint32_t>;
 
 // Where the objects of the image lie (offsets from the file base).
 struct Image {
@@ -43,6 +44,7 @@ struct Image {
         return reinterpret_cast<bp::ArenaHeader*>(base + layout.regions[bp::kRegionCommon].offset);
     }
     QueueHeader* queue() const { return reinterpret_cast<QueueHeader*>(base + q_off); }
+    W& hdr_registry_token() const { return reinterpret_cast<bp::Header*>(base)->registry_lock.token; }
     // The semaphore's words (rsem.cpp): lock 16 bytes, then magic, kind,
     // count, nwaiting, seq, broken; then 64 records of 6 words.
     std::uint32_t* sem_words() const {
@@ -146,7 +148,6 @@ protected:
     Image img_;
 };
 
-using W = std::atomic<std::uint32_t>;
 void poke(W& w, std::uint32_t v) { w.store(v); }
 
 TEST_F(IpcValidate, ACorruptStructureIsRefusedAtAttachNamingTheField) {
@@ -214,6 +215,27 @@ TEST_F(IpcValidate, ACorruptObjectIsRefusedAtOpenNamingTheField) {
         run(c);
         if (HasFatalFailure()) return;
     }
+}
+
+TEST_F(IpcValidate, ALockNamingTheJoinersNewGenerationIsRefused) {
+    build();
+    ASSERT_FALSE(HasFatalFailure());
+    // Slot 0 "running" in a process that is gone: the monitor recovers it
+    // at once, and its recovery waits for the registry lock, which names
+    // the generation the next host attach (slot 7) is about to take. No
+    // process can hold that token: before this check the recovery waited
+    // for it for ever and the leave never returned.
+    const pid_t gone = spawn([] { return 0; });
+    ASSERT_EQ(reap(gone), 0);
+    poke(img_.rtpu(0)->pid, std::uint32_t(gone));
+    poke(img_.rtpu(0)->kind, 1);
+    poke(img_.rtpu(0)->status, bp::make_status(5, bp::SlotState::Running));
+    const std::uint32_t next = bp::status_gen(img_.rtpu(7)->status.load()) + 1;
+    poke(img_.hdr_registry_token(), bp::make_token(7, next));
+    EXPECT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), -EBADMSG);
+    EXPECT_NE(std::string(chm_bp_last_error()).find("header.registry_lock.token"), std::string::npos)
+        << chm_bp_last_error();
+    EXPECT_EQ(bp::status_state(img_.rtpu(7)->status.load()), bp::SlotState::Free);  // the join was undone
 }
 
 TEST_F(IpcValidate, ACorruptArenaIsRefusedWhenItIsUsed) {

@@ -140,7 +140,8 @@ bool arena_block_used(const View& v, const ArenaHeader* a, std::uint32_t payload
     if (payload < first(v, a) + sizeof(BlockHeader) || payload >= end(v, a) || payload % kBlockAlign) return false;
     const std::uint32_t b = payload - sizeof(BlockHeader);
     const BlockHeader* h = block(v, b);
-    return bused(h) && h->tag.load(R) == (b ^ kBlockTagXor) && bsize(h) >= size + sizeof(BlockHeader) &&
+    // 64-bit: a size near 4 GiB must not wrap to a small requirement.
+    return bused(h) && h->tag.load(R) == (b ^ kBlockTagXor) && bsize(h) >= std::uint64_t(size) + sizeof(BlockHeader) &&
            bsize(h) <= end(v, a) - b;
 }
 

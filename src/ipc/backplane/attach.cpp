@@ -197,6 +197,11 @@ int attach(const char* path, int want, SlotKind kind, const char* name, int* slo
         }
         if (r) set_error("backplane %s: every slot belongs to a live process", path);
     }
+    if (r == 0 && (r = validate_fresh_token(a, make_token(slot, gen), why, sizeof why)) != 0) {
+        set_error("backplane %s: %s", path, why);
+        a.rtpu(slot)->pid.store(0, R);
+        a.rtpu(slot)->status.store(make_status(gen, SlotState::Free), std::memory_order_release);
+    }
     if (r == 0) {
         a.slot = slot;
         a.gen = gen;

@@ -126,6 +126,11 @@ int validate_header(const Header& h, std::uint64_t file_size, char* why, std::si
 // committed registry entry's payload (inside its arena, no 32-bit wrap,
 // an allocated block): only what no live process changes mid-operation.
 int validate_structure(const View& v, char* why, std::size_t n);
+// Right after a join took `token` (a generation nobody had before): no
+// lock of the backplane's own may name it. One that does can only be
+// corrupt, and it would look held by a live process for ever (a recovery
+// waiting for the registry lock would never end).
+int validate_fresh_token(const View& v, std::uint32_t token, char* why, std::size_t n);
 // At an object's open: entry `index`'s payload as above and at least
 // `min_size` bytes; *off and *size receive the checked values.
 int entry_payload(const View& v, std::uint32_t index, std::uint32_t min_size, std::uint32_t* off,

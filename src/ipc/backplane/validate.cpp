@@ -115,6 +115,31 @@ int validate_structure(const View& v, char* why, std::size_t n) {
     return 0;
 }
 
+int validate_fresh_token(const View& v, std::uint32_t token, char* why, std::size_t n) {
+    const std::uint32_t slot = token_slot(token), rt = make_token(slot, token_gen(token), true);
+    auto named = [&](const Lock& l) {
+        const std::uint32_t t = l.token.load(R);
+        return t == token || t == rt;
+    };
+    if (named(v.hdr()->registry_lock))
+        return corrupt(why, n, "header.registry_lock.token 0x%08x names slot %u generation %u, which did not exist "
+                       "until this join", v.hdr()->registry_lock.token.load(R), slot, token_gen(token));
+    for (std::uint32_t k = 0; k <= v.slots(); ++k) {
+        const std::uint32_t where = k == v.slots() ? kWhereCommon : k;
+        if (named(v.arena_for(where)->lock)) {
+            char name[32];
+            if (where == kWhereCommon) std::snprintf(name, sizeof name, "common arena");
+            else std::snprintf(name, sizeof name, "local[%u] arena", k);
+            return corrupt(why, n, "%s.lock.token names slot %u generation %u, which did not exist until this join", name,
+                           slot, token_gen(token));
+        }
+        if (k < v.slots() && named(v.ring(k)->lock))
+            return corrupt(why, n, "ring[%u].lock.token names slot %u generation %u, which did not exist until this join", k,
+                           slot, token_gen(token));
+    }
+    return 0;
+}
+
 int entry_payload(const View& v, std::uint32_t index, std::uint32_t min_size, std::uint32_t* off,
                   std::uint32_t* size, char* why, std::size_t n) {
     if (index >= v.geo().registry_capacity) return corrupt(why, n, "registry index %u out of range", index);
