@@ -93,7 +93,8 @@ test-fuzz: deps-fuzz $(BUILD_FUZZ)/build.ninja
 fuzz: deps-fuzz $(BUILD_FUZZ)/build.ninja
 	meson compile -C $(BUILD_FUZZ) $(FUZZ_TARGETS)
 	for t in $(FUZZ_TARGETS); do \
-	    tests/fuzz/run.sh $(BUILD_FUZZ)/tests/fuzz/$$t tests/fuzz/corpus/$${t#fuzz_} $(FUZZ_SECONDS) || exit 1; \
+	    r=tests/fuzz/regress/$${t#fuzz_}; [ -d $$r ] || r=; \
+	    tests/fuzz/run.sh $(BUILD_FUZZ)/tests/fuzz/$$t tests/fuzz/corpus/$${t#fuzz_} $(FUZZ_SECONDS) $$r || exit 1; \
 	done
 
 # Regenerate the committed seed corpora (tests/fuzz/make_seeds.cpp).

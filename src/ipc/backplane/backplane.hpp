@@ -8,6 +8,7 @@
 //   registry lock -> object locks (a subsystem's own) -> arena locks.
 #pragma once
 
+#include <cerrno>
 #include <cstddef>
 #include <cstdint>
 
@@ -111,7 +112,7 @@ Attachment* current();
 // file or object: a field out of range, an index outside its table, a
 // region that does not fit): -EBADMSG, as for a bad file header, with
 // chm_bp_last_error() naming the object and the field. Never a crash.
-inline constexpr int kCorrupt = -74;  // -EBADMSG (static_assert in validate.cpp)
+inline constexpr int kCorrupt = -EBADMSG;
 
 // Why an operation failed, for chm_bp_last_error() (thread-local).
 void set_error(const char* fmt, ...) __attribute__((format(printf, 1, 2)));

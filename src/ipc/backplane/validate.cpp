@@ -24,8 +24,6 @@
 
 namespace chm::bp {
 
-static_assert(kCorrupt == -EBADMSG);
-
 namespace {
 
 constexpr auto R = std::memory_order_relaxed;
