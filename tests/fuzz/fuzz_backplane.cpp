@@ -87,6 +87,10 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
     g_seed = chm::fuzz::make_seed_image((g_dir + "/seed.bp").c_str());
     ::unlink((g_dir + "/seed.bp").c_str());
     g_path = g_dir + "/image.bp";
+    std::atexit([] {  // a clean end leaves nothing behind (a crash leaves the image to look at)
+        ::unlink(g_path.c_str());
+        ::rmdir(g_dir.c_str());
+    });
     g_fd = ::open(g_path.c_str(), O_RDWR | O_CREAT | O_TRUNC | O_CLOEXEC, 0600);
     if (g_fd < 0) {
         std::perror("image");
