@@ -16,7 +16,7 @@ PKGS_BENCH = libbenchmark-dev rt-tests python3-matplotlib
 # clang's -fsanitize=fuzzer links libclang_rt.fuzzer, which Debian 12
 # ships in libclang-rt-14-dev (libfuzzer-14-dev is the standalone copy).
 PKGS_FUZZ  = clang libclang-rt-14-dev
-FUZZ_TARGETS = fuzz_backplane fuzz_msgq fuzz_xmail
+FUZZ_TARGETS = fuzz_backplane fuzz_msgq fuzz_xmail fuzz_args
 
 .PHONY: all deps deps-cross deps-bench deps-fuzz build demo demo-multi stress test test-native test-m68k \
         test-aarch64 test-fuzz fuzz fuzz-seeds bench clean
@@ -79,19 +79,20 @@ test-aarch64: deps deps-cross build-aarch64/build.ninja
 
 # The libFuzzer harnesses (tests/fuzz, issue 15 item 4) in their own clang
 # build, so the gcc builds above are untouched. Only the harnesses are
-# compiled there, not the rest of the project.
+# compiled there, not the rest of the project (ninja by output path: it
+# regenerates the build first when a meson.build changed).
 $(BUILD_FUZZ)/build.ninja:
 	CC=clang CXX=clang++ meson setup $(BUILD_FUZZ) -Dfuzz=true
 
-# Each harness briefly (suite fuzz: 60 + 20 + 15 s, two at a time).
+# Each harness briefly (suite fuzz: 60 + 20 + 15 + 10 s, two at a time).
 test-fuzz: deps-fuzz $(BUILD_FUZZ)/build.ninja
-	meson compile -C $(BUILD_FUZZ) $(FUZZ_TARGETS)
+	ninja -C $(BUILD_FUZZ) $(FUZZ_TARGETS:%=tests/fuzz/%)
 	$(MESON_TEST) -C $(BUILD_FUZZ) --suite fuzz --no-rebuild
 
 # Each harness for FUZZ_SECONDS (default 300), one after the other; a
 # crash stops the run and leaves its input in fuzz-artifacts/.
 fuzz: deps-fuzz $(BUILD_FUZZ)/build.ninja
-	meson compile -C $(BUILD_FUZZ) $(FUZZ_TARGETS)
+	ninja -C $(BUILD_FUZZ) $(FUZZ_TARGETS:%=tests/fuzz/%)
 	for t in $(FUZZ_TARGETS); do \
 	    r=tests/fuzz/regress/$${t#fuzz_}; [ -d $$r ] || r=; \
 	    tests/fuzz/run.sh $(BUILD_FUZZ)/tests/fuzz/$$t tests/fuzz/corpus/$${t#fuzz_} $(FUZZ_SECONDS) $$r || exit 1; \
@@ -99,9 +100,9 @@ fuzz: deps-fuzz $(BUILD_FUZZ)/build.ninja
 
 # Regenerate the committed seed corpora (tests/fuzz/make_seeds.cpp).
 fuzz-seeds: deps-fuzz $(BUILD_FUZZ)/build.ninja
-	meson compile -C $(BUILD_FUZZ) fuzz-make-seeds
+	ninja -C $(BUILD_FUZZ) tests/fuzz/fuzz-make-seeds
 	rm -rf tests/fuzz/corpus
-	mkdir -p tests/fuzz/corpus/backplane tests/fuzz/corpus/msgq tests/fuzz/corpus/xmail
+	mkdir -p tests/fuzz/corpus/backplane tests/fuzz/corpus/msgq tests/fuzz/corpus/xmail tests/fuzz/corpus/args
 	$(BUILD_FUZZ)/tests/fuzz/fuzz-make-seeds tests/fuzz/corpus
 
 $(BUILD_BENCH)/build.ninja:

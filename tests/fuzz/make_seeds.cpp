@@ -88,6 +88,11 @@ int main(int argc, char** argv) {
     put(dir + "/xmail/missing-arg", spawn(3, t, 18));
     put(dir + "/xmail/no-nul", spawn(1, std::string("/x.so\0ab", 8), 8));
     put(dir + "/xmail/long-text", spawn(0, std::string("/x.so\0", 6), 600));
-    std::printf("%u backplane patches, 3 msgq programs, 4 spawn requests in %s\n", n + 1, dir.c_str());
+    // args: NUL-separated command-line values.
+    static const char kArgs[] = "5\0" "0\0" "99\0" "100\0" "-1\0" "007\0" "12x\0" "\0" "+3\0" " 4\0"
+                                "9223372036854775808\0" "1023\0" "1024";
+    const std::string args(kArgs, sizeof kArgs - 1);
+    put(dir + "/args/values", std::vector<std::uint8_t>(args.begin(), args.end()));
+    std::printf("%u backplane patches, 3 msgq programs, 4 spawn requests, 1 argument list in %s\n", n + 1, dir.c_str());
     return 0;
 }
