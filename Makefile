@@ -4,6 +4,8 @@
 
 BUILD       ?= build
 BUILD_BENCH ?= build-release
+BUILD_FUZZ  ?= build-fuzz
+FUZZ_SECONDS ?= 300
 MESON_TEST  ?= meson test --print-errorlogs --num-processes 2
 
 PKGS_BUILD = meson ninja-build g++ pkg-config python3 libgtest-dev libgmock-dev \
@@ -11,9 +13,13 @@ PKGS_BUILD = meson ninja-build g++ pkg-config python3 libgtest-dev libgmock-dev 
 PKGS_CROSS = g++-m68k-linux-gnu libc6-dev-m68k-cross \
              g++-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user
 PKGS_BENCH = libbenchmark-dev rt-tests python3-matplotlib
+# clang's -fsanitize=fuzzer links libclang_rt.fuzzer, which Debian 12
+# ships in libclang-rt-14-dev (libfuzzer-14-dev is the standalone copy).
+PKGS_FUZZ  = clang libclang-rt-14-dev
+FUZZ_TARGETS = fuzz_backplane fuzz_msgq fuzz_xmail fuzz_args
 
-.PHONY: all deps deps-cross deps-bench build demo demo-multi stress test test-native test-m68k \
-        test-aarch64 bench clean
+.PHONY: all deps deps-cross deps-bench deps-fuzz build demo demo-multi stress test test-native test-m68k \
+        test-aarch64 test-fuzz fuzz fuzz-seeds bench clean
 
 all: build
 
@@ -25,6 +31,9 @@ deps-cross:
 
 deps-bench:
 	@tools/install-deps.sh $(PKGS_BUILD) $(PKGS_BENCH)
+
+deps-fuzz:
+	@tools/install-deps.sh $(PKGS_BUILD) $(PKGS_FUZZ)
 
 $(BUILD)/build.ninja:
 	meson setup $(BUILD)
@@ -44,7 +53,7 @@ demo: build
 demo-multi: build
 	@sh examples/multi/demo.sh $(BUILD)
 
-test: test-native test-m68k test-aarch64
+test: test-native test-m68k test-aarch64 test-fuzz
 
 # The kill-at-a-named-point tests with 2000 kills per point, not 100, and
 # the differential scheduler test with 20,000 sets per policy, random seed.
@@ -71,6 +80,34 @@ test-aarch64: deps deps-cross build-aarch64/build.ninja
 	meson compile -C build-aarch64
 	$(MESON_TEST) -C build-aarch64 --suite aarch64
 
+# The libFuzzer harnesses (tests/fuzz, issue 15 item 4) in their own clang
+# build, so the gcc builds above are untouched. Only the harnesses are
+# compiled there, not the rest of the project (ninja by output path: it
+# regenerates the build first when a meson.build changed).
+$(BUILD_FUZZ)/build.ninja:
+	CC=clang CXX=clang++ meson setup $(BUILD_FUZZ) -Dfuzz=true
+
+# Each harness briefly (suite fuzz: 60 + 20 + 15 + 10 s, two at a time).
+test-fuzz: deps-fuzz $(BUILD_FUZZ)/build.ninja
+	ninja -C $(BUILD_FUZZ) $(FUZZ_TARGETS:%=tests/fuzz/%)
+	$(MESON_TEST) -C $(BUILD_FUZZ) --suite fuzz --no-rebuild
+
+# Each harness for FUZZ_SECONDS (default 300), one after the other; a
+# crash stops the run and leaves its input in fuzz-artifacts/.
+fuzz: deps-fuzz $(BUILD_FUZZ)/build.ninja
+	ninja -C $(BUILD_FUZZ) $(FUZZ_TARGETS:%=tests/fuzz/%)
+	for t in $(FUZZ_TARGETS); do \
+	    r=tests/fuzz/regress/$${t#fuzz_}; [ -d $$r ] || r=; \
+	    tests/fuzz/run.sh $(BUILD_FUZZ)/tests/fuzz/$$t tests/fuzz/corpus/$${t#fuzz_} $(FUZZ_SECONDS) $$r || exit 1; \
+	done
+
+# Regenerate the committed seed corpora (tests/fuzz/make_seeds.cpp).
+fuzz-seeds: deps-fuzz $(BUILD_FUZZ)/build.ninja
+	ninja -C $(BUILD_FUZZ) tests/fuzz/fuzz-make-seeds
+	rm -rf tests/fuzz/corpus
+	mkdir -p tests/fuzz/corpus/backplane tests/fuzz/corpus/msgq tests/fuzz/corpus/xmail tests/fuzz/corpus/args
+	$(BUILD_FUZZ)/tests/fuzz/fuzz-make-seeds tests/fuzz/corpus
+
 $(BUILD_BENCH)/build.ninja:
 	meson setup $(BUILD_BENCH) --buildtype=release
 
@@ -79,4 +116,4 @@ bench: deps-bench $(BUILD_BENCH)/build.ninja
 	/usr/bin/python3 bench/run.py --build $(BUILD_BENCH) $(if $(QUICK),--quick,)
 
 clean:
-	rm -rf $(BUILD) $(BUILD_BENCH) build-m68k build-aarch64
+	rm -rf $(BUILD) $(BUILD_BENCH) $(BUILD_FUZZ) build-m68k build-aarch64

@@ -96,6 +96,17 @@ int chm_bp_check_file(const char* path);
  * open/fallocate/mmap/link. Nothing is left behind on error. */
 int chm_bp_create(const char* path, const chm_bp_config_t* cfg);
 
+/* Validate the backplane file at `path` (NULL: default) without attaching:
+ * the header, the RTPU table, the express-mail rings, every arena's header
+ * and block chain (except one a process holds locked), every registry
+ * entry (payload inside its arena without 32-bit wrap, an allocated block)
+ * and every live message queue and remote semaphore (geometry, indices,
+ * records). Read-only; `chimera start` and `chimera status` run it first.
+ * Errors: -EBADMSG the file or an object in it is corrupt, and
+ * chm_bp_last_error() names the file, the structure and the field;
+ * -ENOENT no file; other -errno from open/mmap. */
+int chm_bp_validate(const char* path);
+
 /* Join the backplane at `path` (NULL: default) as RTPU `rtpu`
  * (0..slots-1; 0 is the host server), named `name` (NULL: "rtpu<n>").
  * A slot left by a dead process (or being recovered) is recovered first and
@@ -104,8 +115,10 @@ int chm_bp_create(const char* path, const chm_bp_config_t* cfg);
  * Errors: -EBUSY this process is already attached, or the slot belongs to a
  * live process; -ECHRNG rtpu out of range; -ENAMETOOLONG; -ENOENT no file;
  * -ELOOP, -EPERM the file may not be attached (chm_bp_check_file);
- * -EBADMSG not a backplane, corrupt, or another layout version (see
- * chm_bp_last_error); -ETIMEDOUT a recovery of that slot by another
+ * -EBADMSG not a backplane, another layout version, or a structure in it
+ * is corrupt (a slot state or kind, a ring's geometry, an arena header, a
+ * registry entry's payload: see chm_bp_last_error, which names the field);
+ * -ETIMEDOUT a recovery of that slot by another
  * process did not finish within 5 s; other -errno from open/mmap. */
 int chm_bp_join(const char* path, int rtpu, const char* name);
 

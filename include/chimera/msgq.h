@@ -106,14 +106,20 @@ void chm_msgq_attr_init(chm_msgq_attr_t* attr);
  * -ENAMETOOLONG; -ECHRNG `where` is neither CHM_MSGQ_COMMON nor a slot;
  * -EEXIST the name is taken; -ENOMEM no room for the queue there;
  * -ENOSPC the registry is full; -ENOTRECOVERABLE that memory was damaged
- * by a process that died in it; -ETIMEDOUT a live peer held the registry
- * for more than 5 s. */
+ * by a process that died in it; -EBADMSG that memory's block chain is
+ * corrupt (chm_bp_last_error names the block and field); -ETIMEDOUT a live
+ * peer held the registry for more than 5 s. */
 int chm_msgq_create(const char* name, const chm_msgq_attr_t* attr, int where, chm_msgq_t** out);
 
 /* Open the queue `name` created by any process. Opening twice gives the
  * same handle and needs two closes.
+ * The queue is validated first (its registry entry, its geometry and,
+ * under its lock, every index and record) and the checked geometry kept in
+ * this process: later calls address the queue with it.
  * Errors: -ENOTCONN; -EINVAL NULL name or out; -ENOENT no queue of that
- * name; -ETIMEDOUT. */
+ * name; -EBADMSG the queue is corrupt (chm_bp_last_error names the queue
+ * and the field); -EDEADLK its lock was held past 5 s by a live peer;
+ * -ETIMEDOUT. */
 int chm_msgq_open(const char* name, chm_msgq_t** out);
 
 /* Close this process's handle (the queue lives on until destroyed; a
@@ -137,7 +143,9 @@ int chm_msgq_destroy(const char* name);
  * -EINVAL bad handle, NULL data with len > 0, prio > CHM_MSGQ_PRIO_MAX;
  * -EINTR a user signal (task) or a signal handler (thread) interrupted the
  * wait; -EIDRM the queue was destroyed; -ENOTRECOVERABLE the queue is
- * broken; -EDEADLK its lock was held past 5 s by a live peer; -ENOTCONN.
+ * broken; -EDEADLK its lock was held past 5 s by a live peer; -EBADMSG an
+ * index read from shared memory (the free list's head, a list's tail) is
+ * out of range (the message is not sent); -ENOTCONN.
  * On any error nothing was queued. */
 int chm_msgq_send(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* data, size_t len);
 int chm_msgq_send_timed(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* data, size_t len,
@@ -152,13 +160,16 @@ int chm_msgq_try_send(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* d
  * Errors: -EAGAIN empty and not waiting; -ETIMEDOUT; -EMSGSIZE the next
  * message is longer than size (it stays queued; *info, if given, says its
  * length); -EINVAL bad handle, NULL buf with size > 0; -EINTR; -EIDRM;
- * -ENOTRECOVERABLE; -EDEADLK; -ENOTCONN. On any error nothing was taken. */
+ * -ENOTRECOVERABLE; -EDEADLK; -EBADMSG a list head or the message's length
+ * read from shared memory is out of range; -ENOTCONN. On any error nothing
+ * was taken. */
 int chm_msgq_receive(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info);
 int chm_msgq_receive_timed(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info,
                            int64_t timeout_ns);
 int chm_msgq_try_receive(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info);
 
-/* A snapshot of the queue. Errors: -EINVAL bad handle or NULL out;
+/* A snapshot of the queue (its limits as its open checked them).
+ * Errors: -EINVAL bad handle (one this process has not open) or NULL out;
  * -ENOTCONN. */
 int chm_msgq_info(chm_msgq_t* q, chm_msgq_info_t* out);
 

@@ -41,12 +41,16 @@ typedef struct chm_rsem chm_rsem_t; /* a handle: valid in this process */
  * its own, so a V to a polling waiter moves only the line it spins on.
  * Errors: -ENOTCONN not attached to a backplane; -EINVAL NULL name/out,
  * bad kind, binary initial > 1; -EEXIST name taken; -ENOMEM no room;
- * -ENOSPC registry full; -ENAMETOOLONG; -ECHRNG bad `where`. */
+ * -ENOSPC registry full; -ENAMETOOLONG; -ECHRNG bad `where`; -EBADMSG that
+ * memory's block chain is corrupt (chm_bp_last_error names the field). */
 int chm_rsem_create(const char* name, enum chm_sem_kind kind, uint32_t initial, int where,
                     chm_rsem_t** out);
 
 /* Open the semaphore `name` created by any process.
- * Errors: -ENOTCONN; -EINVAL; -ENOENT no such semaphore. */
+ * The semaphore is validated first (its registry entry, kind, count,
+ * record states and waiting count).
+ * Errors: -ENOTCONN; -EINVAL; -ENOENT no such semaphore; -EBADMSG it is
+ * corrupt (chm_bp_last_error names the semaphore and the field). */
 int chm_rsem_open(const char* name, chm_rsem_t** out);
 
 /* P: take the semaphore, waiting as long as needed (chm_rsem_p), at most

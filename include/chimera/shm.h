@@ -34,13 +34,16 @@ extern "C" {
  * -ENAMETOOLONG; -ECHRNG `where` is neither CHM_SHM_COMMON nor a slot;
  * -EEXIST the name is taken; -ENOMEM no room in that window;
  * -ENOSPC the registry is full; -ENOTRECOVERABLE that window was damaged
- * by a process that died in it; -ETIMEDOUT a live peer held the registry
- * for more than 5 s; -ENOTCONN not attached. */
+ * by a process that died in it; -EBADMSG that window's block chain is
+ * corrupt (chm_bp_last_error names the block and field); -ETIMEDOUT a live
+ * peer held the registry for more than 5 s; -ENOTCONN not attached. */
 int chm_shm_create(const char* name, size_t size, int where, void** out);
 
 /* Attach the segment `name`: *out its address here, *size (may be NULL)
  * its size. Attaching twice gives the same address and needs two detaches.
  * Errors: -EINVAL NULL name or out; -ENOENT no segment of that name;
+ * -EBADMSG its registry entry is corrupt: offset and size do not describe
+ * an allocated block of its memory (chm_bp_last_error names the field);
  * -ETIMEDOUT; -ENOTCONN. */
 int chm_shm_attach(const char* name, void** out, size_t* size);
 

@@ -15,6 +15,17 @@ namespace {
 
 using namespace ipc::msgq;
 
+// The tests write a queue's slots directly, as a dying process would: with
+// the geometry an open would check (the library keeps it per process).
+Geo geo_of(const QueueHeader* q) {
+    Geo g{};
+    char why[200];
+    read_geometry(q, q->total_size, &g, why, sizeof why);
+    return g;
+}
+MsgSlot* slot_at(QueueHeader* q, std::uint32_t i) { return ipc::msgq::slot_at(q, geo_of(q), i); }
+Waiter* waiter_at(QueueHeader* q, std::uint32_t i) { return ipc::msgq::waiter_at(q, geo_of(q), i); }
+
 class IpcMsgqRobust : public MsgqTest {
 protected:
     // A host process joined as RTPU `slot`, blocked on the futex in a

@@ -1,6 +1,7 @@
 // The chimera command (start / status / stop / rm) and chimera-rtpu's
 // command line, run as real processes; bad input gives one clear line and
 // a non-zero exit, and leaves nothing behind.
+#include <fcntl.h>
 #include <sched.h>
 #include <sys/mman.h>
 
@@ -72,6 +73,34 @@ TEST_F(RtpuTest, ChimeraStartStatusStopRmRoundTrip) {
     EXPECT_FALSE(exists(bp_));
     EXPECT_FALSE(exists(bp_ + ".rtpu1.log"));
     EXPECT_FALSE(exists(bp_ + ".rtpu2.log"));
+}
+
+// Issue 15 item 4: status refuses a table that fails validation, and
+// start validates an existing file before it forks anything.
+TEST_F(RtpuTest, ChimeraStatusAndStartRefuseACorruptBackplane) {
+    chm_bp_config_t cfg;
+    chm_bp_config_init(&cfg);
+    cfg.rtpu_slots = 4;
+    ASSERT_EQ(chm_bp_create(bp_.c_str(), &cfg), 0) << chm_bp_last_error();
+    {
+        const int fd = open(bp_.c_str(), O_RDWR);
+        ASSERT_GE(fd, 0);
+        std::uint32_t hdr[56];  // the header's first 224 bytes (layout.hpp)
+        ASSERT_EQ(pread(fd, hdr, sizeof hdr, 0), ssize_t(sizeof hdr));
+        const std::uint32_t rings = hdr[16], stride = hdr[24];  // regions[rings].offset, ring_stride
+        const std::uint32_t zero = 0;  // ring 1's capacity
+        ASSERT_EQ(pwrite(fd, &zero, sizeof zero, off_t(rings) + stride), ssize_t(sizeof zero));
+        close(fd);
+    }
+    Outcome r = chimera({"status"});
+    EXPECT_EQ(r.status, 1);
+    EXPECT_TRUE(contains(r.err, "refusing")) << r.err;
+    EXPECT_TRUE(contains(r.err, "ring[1].capacity is 0")) << r.err;
+    r = chimera({"start", "--rtpus", "1"});
+    EXPECT_EQ(r.status, 1);
+    EXPECT_TRUE(contains(r.err, "ring[1].capacity is 0")) << r.err;
+    EXPECT_FALSE(exists(bp_ + ".rtpu1.log"));  // nothing was forked
+    EXPECT_TRUE(exists(bp_));                  // and the file is not ours to remove
 }
 
 TEST_F(RtpuTest, ChimeraStopKillsAnRtpuThatWillNotStop) {

@@ -243,7 +243,7 @@ TEST_F(RtpuTest, RingSurvivesDeadAndStuckSenders) {
             chm::bp::Attachment* a = chm::bp::current();
             chm::bp::RingHeader* ring = a->ring(1);
             for (std::uint32_t i = 0; i < ring->capacity; ++i) {
-                chm::xmail::Record* rec = chm::xmail::record_at(ring, i);
+                chm::xmail::Record* rec = chm::xmail::record_at(*a, ring, i);
                 rec->owner.store(a->token);
                 rec->stamp_ms.store(chm::bp::mono_ms());
                 rec->state.store(chm::xmail::make_state(1000 + i, chm::xmail::kWriting));

@@ -43,8 +43,8 @@ int records_of(int rtpu, std::uint32_t token) {
     const chm::bp::View& v = *chm::bp::current();
     chm::bp::RingHeader* ring = v.ring(std::uint32_t(rtpu));
     int n = 0;
-    for (std::uint32_t i = 0; i < ring->capacity; ++i) {
-        chm::xmail::Record* r = chm::xmail::record_at(ring, i);
+    for (std::uint32_t i = 0; i < chm::xmail::ring_capacity(v); ++i) {
+        chm::xmail::Record* r = chm::xmail::record_at(v, ring, i);
         if (chm::xmail::phase_of(r->state.load()) != chm::xmail::kFree && r->owner.load() == token) ++n;
     }
     return n;

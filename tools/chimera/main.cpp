@@ -221,9 +221,15 @@ int cmd_start(const Options& o, const StartPlan& p) {
     bool created = false;
     struct stat ls{};
     if (lstat(o.backplane.c_str(), &ls) == 0) {
-        // An existing file is checked before any RTPU starts on it.
+        // An existing file is checked (who may attach it) and validated
+        // (its structure) before any RTPU starts on it: refused here, once,
+        // not by every RTPU as it joins.
         if (chm_bp_check_file(o.backplane.c_str()) != 0) {
             say("%s", chm_bp_last_error());
+            return 1;
+        }
+        if (chm_bp_validate(o.backplane.c_str()) != 0) {
+            say("refusing %s: %s", o.backplane.c_str(), chm_bp_last_error());
             return 1;
         }
     } else {

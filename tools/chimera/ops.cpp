@@ -109,6 +109,20 @@ void print_tasks(int slot) {
 }  // namespace
 
 int cmd_status(const Options& o) {
+    // Who may attach it first (a file we must not trust is not even
+    // read), then the whole table and every object in it, before anything
+    // is shown: a table that fails validation is refused, naming the field.
+    struct stat ls{};
+    if (lstat(o.backplane.c_str(), &ls) == 0) {
+        if (chm_bp_check_file(o.backplane.c_str()) != 0) {
+            say("%s", chm_bp_last_error());
+            return 1;
+        }
+        if (chm_bp_validate(o.backplane.c_str()) != 0) {
+            say("refusing %s: %s", o.backplane.c_str(), chm_bp_last_error());
+            return 1;
+        }
+    }
     if (attach(o)) return 1;
     chm_bp_status_t st;
     chm_bp_status(&st);

@@ -12,6 +12,7 @@
 // bounded by the arena's block count; it happens at object creation, never
 // on a data path.
 #include <cerrno>
+#include <cstdio>
 
 #include "ipc/backplane/backplane.hpp"
 
@@ -26,8 +27,14 @@ std::uint32_t bsize(const BlockHeader* b) { return b->size_flags.load(R) & ~kUse
 bool bused(const BlockHeader* b) { return b->size_flags.load(R) & kUsed; }
 A32* next_link(const View& v, std::uint32_t off) { return v.at<A32>(off + sizeof(BlockHeader)); }
 A32* prev_link(const View& v, std::uint32_t off) { return v.at<A32>(off + sizeof(BlockHeader) + 4); }
-std::uint32_t first(const ArenaHeader* a) { return a->self + sizeof(ArenaHeader); }
-std::uint32_t end(const ArenaHeader* a) { return a->self + a->size; }
+// An arena's bounds come from the process's validated copy of the layout,
+// never from the arena header in the file: a header changed there cannot
+// send a walk outside the map (a->self + a->size could even wrap).
+std::uint32_t bytes_of(const View& v, const ArenaHeader* a) {
+    return v.off_of(a) == v.layout.regions[kRegionCommon].offset ? v.geo().common_size : v.geo().local_window_size;
+}
+std::uint32_t first(const View& v, const ArenaHeader* a) { return v.off_of(a) + std::uint32_t(sizeof(ArenaHeader)); }
+std::uint32_t end(const View& v, const ArenaHeader* a) { return v.off_of(a) + bytes_of(v, a); }
 
 void list_push(const View& v, ArenaHeader* a, std::uint32_t off) {
     const std::uint32_t h = a->free_head.load(R);
@@ -45,7 +52,7 @@ void list_unlink(const View& v, ArenaHeader* a, std::uint32_t off) {
 
 void fix_prev_of_next(const View& v, const ArenaHeader* a, std::uint32_t off) {
     const std::uint32_t nx = off + bsize(block(v, off));
-    if (nx < end(a)) block(v, nx)->prev_size.store(bsize(block(v, off)), R);
+    if (nx < end(v, a)) block(v, nx)->prev_size.store(bsize(block(v, off)), R);
 }
 
 void write_header(const View& v, std::uint32_t off, std::uint32_t size_flags, std::uint32_t prev) {
@@ -63,7 +70,7 @@ void arena_init(const View& v, std::uint32_t off, std::uint32_t size) {
     a->magic = kArenaMagic;
     a->self = off;
     a->size = size;
-    const std::uint32_t b = first(a);
+    const std::uint32_t b = first(v, a);
     write_header(v, b, size - sizeof(ArenaHeader), 0);
     a->free_head.store(0, R);
     list_push(v, a, b);
@@ -83,6 +90,12 @@ int arena_lock(const View& v, ArenaHeader* a, std::uint32_t me) {
         lock_release(&a->lock);
         return -ENOTRECOVERABLE;
     }
+    char why[200];
+    if (arena_validate_locked(v, a, why, sizeof why) != 0) {
+        lock_release(&a->lock);
+        set_error("backplane: %s", why);
+        return kCorrupt;
+    }
     return 0;
 }
 
@@ -90,7 +103,7 @@ void arena_unlock(ArenaHeader* a) { lock_release(&a->lock); }
 
 std::uint32_t arena_alloc_locked(const View& v, ArenaHeader* a, std::uint32_t size,
                                  std::uint32_t owner) {
-    if (size == 0 || size > a->size) return 0;
+    if (size == 0 || size > bytes_of(v, a)) return 0;
     std::uint32_t need = (size + kBlockAlign - 1) / kBlockAlign * kBlockAlign + sizeof(BlockHeader);
     if (need < kMinBlock) need = kMinBlock;
     std::uint32_t b = a->free_head.load(R);
@@ -124,11 +137,12 @@ void arena_commit(const View& v, std::uint32_t payload) {
 }
 
 bool arena_block_used(const View& v, const ArenaHeader* a, std::uint32_t payload, std::uint32_t size) {
-    if (payload < first(a) + sizeof(BlockHeader) || payload >= end(a) || payload % kBlockAlign) return false;
+    if (payload < first(v, a) + sizeof(BlockHeader) || payload >= end(v, a) || payload % kBlockAlign) return false;
     const std::uint32_t b = payload - sizeof(BlockHeader);
     const BlockHeader* h = block(v, b);
-    return bused(h) && h->tag.load(R) == (b ^ kBlockTagXor) && bsize(h) >= size + sizeof(BlockHeader) &&
-           bsize(h) <= end(a) - b;
+    // 64-bit: a size near 4 GiB must not wrap to a small requirement.
+    return bused(h) && h->tag.load(R) == (b ^ kBlockTagXor) && bsize(h) >= std::uint64_t(size) + sizeof(BlockHeader) &&
+           bsize(h) <= end(v, a) - b;
 }
 
 int arena_free_locked(const View& v, ArenaHeader* a, std::uint32_t payload) {
@@ -141,7 +155,7 @@ int arena_free_locked(const View& v, ArenaHeader* a, std::uint32_t payload) {
     h->owner.store(0, R);
     h->size_flags.store(sz, R);  // free from here on
     const std::uint32_t nx = b + sz;
-    if (nx < end(a) && !bused(block(v, nx))) {
+    if (nx < end(v, a) && !bused(block(v, nx))) {
         list_unlink(v, a, nx);
         sz += bsize(block(v, nx));
         h->size_flags.store(sz, R);  // merged with the next block
@@ -165,10 +179,10 @@ bool arena_rebuild_locked(const View& v, ArenaHeader* a) {
     lock_mark_dirty(&a->lock);
     // Walk the chain first without changing anything: a damaged chain is
     // left as it is for bpcheck to describe.
-    for (std::uint32_t b = first(a); b != end(a);) {
+    for (std::uint32_t b = first(v, a); b != end(v, a);) {
         const BlockHeader* h = block(v, b);
         const std::uint32_t sz = bsize(h);
-        if (sz < kMinBlock || sz % kBlockAlign || sz > end(a) - b || h->tag.load(R) != (b ^ kBlockTagXor)) {
+        if (sz < kMinBlock || sz % kBlockAlign || sz > end(v, a) - b || h->tag.load(R) != (b ^ kBlockTagXor)) {
             a->broken.store(1, R);
             return false;
         }
@@ -176,7 +190,7 @@ bool arena_rebuild_locked(const View& v, ArenaHeader* a) {
     }
     a->free_head.store(0, R);
     std::uint32_t used = 0, blocks = 0, prev = 0, prev_off = 0;
-    for (std::uint32_t b = first(a); b != end(a);) {
+    for (std::uint32_t b = first(v, a); b != end(v, a);) {
         BlockHeader* h = block(v, b);
         if (!bused(h) && prev_off && !bused(block(v, prev_off))) {
             // Two free neighbours (a merge cut short): join them.
@@ -195,7 +209,7 @@ bool arena_rebuild_locked(const View& v, ArenaHeader* a) {
     }
     // Free list in address order (pushed back to front).
     std::uint32_t last_free = 0;
-    for (std::uint32_t b = first(a); b != end(a); b += bsize(block(v, b))) {
+    for (std::uint32_t b = first(v, a); b != end(v, a); b += bsize(block(v, b))) {
         if (bused(block(v, b))) continue;
         next_link(v, b)->store(0, R);
         prev_link(v, b)->store(last_free, R);
@@ -211,7 +225,7 @@ bool arena_rebuild_locked(const View& v, ArenaHeader* a) {
 void arena_sweep_uncommitted_locked(const View& v, ArenaHeader* a) {
     for (bool again = true; again;) {
         again = false;
-        for (std::uint32_t b = first(a); b != end(a); b += bsize(block(v, b))) {
+        for (std::uint32_t b = first(v, a); b != end(v, a); b += bsize(block(v, b))) {
             const BlockHeader* h = block(v, b);
             if (bused(h) && h->owner.load(R) != 0) {
                 arena_free_locked(v, a, b + sizeof(BlockHeader));
@@ -223,8 +237,46 @@ void arena_sweep_uncommitted_locked(const View& v, ArenaHeader* a) {
 }
 
 std::uint32_t arena_free_bytes(const View& v, const ArenaHeader* a) {
-    (void)v;
-    return a->size - sizeof(ArenaHeader) - a->used_bytes.load(R);
+    const std::uint32_t room = bytes_of(v, a) - std::uint32_t(sizeof(ArenaHeader)), used = a->used_bytes.load(R);
+    return used < room ? room - used : 0;
+}
+
+int arena_validate_locked(const View& v, const ArenaHeader* a, char* why, std::size_t n) {
+    const std::uint32_t off = v.off_of(a);
+    char name[32];
+    if (off == v.layout.regions[kRegionCommon].offset) std::snprintf(name, sizeof name, "common arena");
+    else std::snprintf(name, sizeof name, "local[%u] arena", (off - v.layout.regions[kRegionLocals].offset) / v.geo().local_window_size);
+    auto bad = [&](const char* fmt, auto... args) {
+        const int k = std::snprintf(why, n, "%s", name);
+        if (k >= 0 && std::size_t(k) < n) std::snprintf(why + k, n - std::size_t(k), fmt, args...);
+        return kCorrupt;
+    };
+    if (a->magic != kArenaMagic) return bad(".magic is 0x%08x, expected 0x%08x", a->magic, kArenaMagic);
+    if (a->self != off) return bad(".self is %u, expected %u", a->self, off);
+    if (a->size != bytes_of(v, a)) return bad(".size is %u, expected %u", a->size, bytes_of(v, a));
+    // The chain: every step of alloc and free relies on sizes and prev
+    // sizes that lead from block to block inside the arena.
+    std::uint32_t frees = 0, prev = 0;
+    for (std::uint32_t b = first(v, a); b != end(v, a);) {
+        const BlockHeader* h = block(v, b);
+        const std::uint32_t sz = bsize(h);
+        if (sz < kMinBlock || sz % kBlockAlign || sz > end(v, a) - b) return bad(" block at %u: size %u does not fit", b, sz);
+        if (h->tag.load(R) != (b ^ kBlockTagXor)) return bad(" block at %u: tag 0x%08x is wrong", b, h->tag.load(R));
+        if (h->prev_size.load(R) != prev) return bad(" block at %u: prev_size %u, the previous block has %u", b, h->prev_size.load(R), prev);
+        frees += !bused(h);
+        prev = sz;
+        b += sz;
+    }
+    // The free list: links to free blocks of this chain, no longer than
+    // the free blocks (no cycle).
+    std::uint32_t k = 0;
+    for (std::uint32_t f = a->free_head.load(R); f; f = next_link(v, f)->load(R)) {
+        if (f < first(v, a) || f > end(v, a) - kMinBlock || f % kBlockAlign || block(v, f)->tag.load(R) != (f ^ kBlockTagXor))
+            return bad(".free_head list: link %u is not a block of this arena", f);
+        if (bused(block(v, f))) return bad(".free_head list: block %u is in use", f);
+        if (++k > frees) return bad(".free_head list: longer than the %u free blocks (a cycle)", frees);
+    }
+    return 0;
 }
 
 void arena_check(const View& v, const ArenaHeader* a, std::uint32_t off, std::uint32_t size,
@@ -236,10 +288,10 @@ void arena_check(const View& v, const ArenaHeader* a, std::uint32_t off, std::ui
     if (a->lock.dirty.load(R)) r.problem("%s.lock.dirty: a change was left half-done", name);
     std::uint32_t used = 0, blocks = 0, frees = 0, prev = 0;
     bool prev_free = false;
-    for (std::uint32_t b = first(a); b != end(a);) {
+    for (std::uint32_t b = first(v, a); b != end(v, a);) {
         const BlockHeader* h = block(v, b);
         const std::uint32_t sz = bsize(h);
-        if (sz < kMinBlock || sz % kBlockAlign || sz > end(a) - b)
+        if (sz < kMinBlock || sz % kBlockAlign || sz > end(v, a) - b)
             return r.problem("%s block at %u: size %u does not fit the arena (chain broken)", name, b, sz);
         if (h->tag.load(R) != (b ^ kBlockTagXor))
             return r.problem("%s block at %u: tag 0x%08x is wrong (stray header)", name, b, h->tag.load(R));
@@ -261,7 +313,7 @@ void arena_check(const View& v, const ArenaHeader* a, std::uint32_t off, std::ui
     if (blocks != a->blocks.load(R)) r.problem("%s.blocks is %u, the chain has %u", name, a->blocks.load(R), blocks);
     std::uint32_t n = 0, back = 0;
     for (std::uint32_t f = a->free_head.load(R); f; f = next_link(v, f)->load(R)) {
-        if (f < first(a) || f >= end(a) || f % kBlockAlign || block(v, f)->tag.load(R) != (f ^ kBlockTagXor))
+        if (f < first(v, a) || f > end(v, a) - kMinBlock || f % kBlockAlign || block(v, f)->tag.load(R) != (f ^ kBlockTagXor))
             return r.problem("%s free list: link %u is not a block of this arena", name, f);
         if (bused(block(v, f))) r.problem("%s free list: block %u is in use", name, f);
         if (prev_link(v, f)->load(R) != back) r.problem("%s free list: block %u links back to %u, not %u", name, f, prev_link(v, f)->load(R), back);

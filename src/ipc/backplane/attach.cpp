@@ -57,6 +57,7 @@ void after_fork_child() {
     unmap(&g_att);
     if (g_att.fd >= 0) ::close(g_att.fd);
     std::free(g_att.local_refs);
+    std::free(g_att.objects);
     g_att = Attachment{};
     g_attached.store(false, R);
     const pthread_mutex_t fresh = PTHREAD_MUTEX_INITIALIZER;  // the parent may have held it
@@ -165,6 +166,11 @@ int attach(const char* path, int want, SlotKind kind, const char* name, int* slo
     Attachment& a = g_att;
     char why[768];
     int r = map_file(path, true, &a, &a.fd, why, sizeof why, true);
+    if (r == 0 && (r = validate_structure(a, why, sizeof why)) != 0) {
+        unmap(&a);
+        ::close(a.fd);
+        a = Attachment{};
+    }
     if (r) {
         ::pthread_mutex_unlock(&g_mu);
         set_error("backplane %s: %s", path, why);
@@ -191,17 +197,24 @@ int attach(const char* path, int want, SlotKind kind, const char* name, int* slo
         }
         if (r) set_error("backplane %s: every slot belongs to a live process", path);
     }
+    if (r == 0 && (r = validate_fresh_token(a, make_token(slot, gen), why, sizeof why)) != 0) {
+        set_error("backplane %s: %s", path, why);
+        a.rtpu(slot)->pid.store(0, R);
+        a.rtpu(slot)->status.store(make_status(gen, SlotState::Free), std::memory_order_release);
+    }
     if (r == 0) {
         a.slot = slot;
         a.gen = gen;
         a.token = make_token(slot, gen);
         a.kind = kind;
         std::strcpy(a.path, path);
-        a.local_refs = static_cast<std::uint32_t*>(std::calloc(a.hdr()->geo.registry_capacity, sizeof(std::uint32_t)));
-        if (!a.local_refs) r = -ENOMEM;
+        a.local_refs = static_cast<std::uint32_t*>(std::calloc(a.geo().registry_capacity, sizeof(std::uint32_t)));
+        a.objects = static_cast<Attachment::OpenObject*>(std::calloc(a.geo().registry_capacity, sizeof(Attachment::OpenObject)));
+        if (!a.local_refs || !a.objects) r = -ENOMEM;
         else if ((r = monitor_start(&a)) != 0) set_error("backplane %s: cannot start the monitor thread", path);
         if (r) {
             std::free(a.local_refs);
+            std::free(a.objects);
             a.rtpu(slot)->pid.store(0, R);
             a.rtpu(slot)->status.store(make_status(gen, SlotState::Free), std::memory_order_release);
         }
@@ -252,7 +265,7 @@ int chm_bp_leave(void) {
     // attachment of this slot (ours and any left over).
     if (registry_lock(a, a.token) == 0) {
         withdraw_departing(a, a.slot, a.gen, a.token);
-        for (std::uint32_t i = 0; i < a.hdr()->geo.registry_capacity; ++i)
+        for (std::uint32_t i = 0; i < a.geo().registry_capacity; ++i)
             if (a.entry(i)->attached.load(R) & (1u << a.slot)) registry_detach_locked(a, i, a.slot, a.token);
         registry_unlock(a);
     }
@@ -265,6 +278,7 @@ int chm_bp_leave(void) {
     unmap(&a);
     ::close(a.fd);
     std::free(a.local_refs);
+    std::free(a.objects);
     a = Attachment{};
     ::pthread_mutex_unlock(&g_mu);
     return 0;
@@ -281,14 +295,14 @@ int chm_bp_status(chm_bp_status_t* out) {
     if (!a) return -ENOTCONN;
     std::memset(out, 0, sizeof *out);
     const Header* h = a->hdr();
-    out->slots = h->geo.rtpu_slots;
+    out->slots = a->geo().rtpu_slots;
     out->self = int32_t(a->slot);
     out->created_ns = h->created_ns;
-    out->file_size = h->file_size;
-    out->registry_capacity = h->geo.registry_capacity;
-    for (std::uint32_t i = 0; i < h->geo.registry_capacity; ++i)
+    out->file_size = a->size;
+    out->registry_capacity = a->geo().registry_capacity;
+    for (std::uint32_t i = 0; i < a->geo().registry_capacity; ++i)
         if (a->entry(i)->state.load(R) == std::uint32_t(EntryState::Live)) ++out->objects;
-    out->common_size = h->geo.common_size;
+    out->common_size = a->geo().common_size;
     out->common_free = arena_free_bytes(*a, a->common_arena());
     out->recoveries = h->recoveries.load(R);
     const std::uint32_t now = mono_ms();

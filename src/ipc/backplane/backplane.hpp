@@ -8,6 +8,7 @@
 //   registry lock -> object locks (a subsystem's own) -> arena locks.
 #pragma once
 
+#include <cerrno>
 #include <cstddef>
 #include <cstdint>
 
@@ -19,13 +20,33 @@ namespace chm::bp {
 
 // ------------------------------------------------------------------ views
 
+// The part of a validated header every lookup needs, as plain values.
+struct Layout {
+    Geometry geo{};
+    Region regions[kRegionCount]{};
+    std::uint32_t ring_stride = 0;
+};
+inline Layout layout_of(const Header& h) {
+    Layout l;
+    l.geo = h.geo;
+    for (unsigned r = 0; r < kRegionCount; ++r) l.regions[r] = h.regions[r];
+    l.ring_stride = h.ring_stride;
+    return l;
+}
+
 // One process's mapping of a backplane file. Offsets are resolved here and
-// nowhere else ("automatic address resolution").
+// nowhere else ("automatic address resolution"). `layout` is the header as
+// map_file validated it, copied into process memory: every table index and
+// region offset comes from it, so a header changed in the file after the
+// open (another process's stray store, a corrupted file) cannot move a
+// lookup outside the map.
 struct View {
     char* base = nullptr;
     std::uint32_t size = 0;
+    Layout layout{};
 
     Header* hdr() const { return reinterpret_cast<Header*>(base); }
+    const Geometry& geo() const { return layout.geo; }
     template <class T>
     T* at(std::uint32_t off) const { return reinterpret_cast<T*>(base + off); }
     std::uint32_t off_of(const void* p) const {
@@ -34,25 +55,32 @@ struct View {
     bool contains(std::uint32_t off, std::uint32_t len) const {
         return off <= size && len <= size - off;
     }
-    std::uint32_t slots() const { return hdr()->geo.rtpu_slots; }
+    std::uint32_t slots() const { return layout.geo.rtpu_slots; }
     RtpuEntry* rtpu(std::uint32_t slot) const {
-        return at<RtpuEntry>(hdr()->regions[kRegionTable].offset) + slot;
+        return at<RtpuEntry>(layout.regions[kRegionTable].offset) + slot;
     }
     RegistryEntry* entry(std::uint32_t i) const {
-        return at<RegistryEntry>(hdr()->regions[kRegionRegistry].offset) + i;
+        return at<RegistryEntry>(layout.regions[kRegionRegistry].offset) + i;
     }
     RingHeader* ring(std::uint32_t slot) const {
-        return at<RingHeader>(hdr()->regions[kRegionRings].offset + slot * hdr()->ring_stride);
+        return at<RingHeader>(layout.regions[kRegionRings].offset + slot * layout.ring_stride);
     }
-    ArenaHeader* common_arena() const { return at<ArenaHeader>(hdr()->regions[kRegionCommon].offset); }
+    ArenaHeader* common_arena() const { return at<ArenaHeader>(layout.regions[kRegionCommon].offset); }
     ArenaHeader* local_arena(std::uint32_t slot) const {
-        return at<ArenaHeader>(hdr()->regions[kRegionLocals].offset +
-                               slot * hdr()->geo.local_window_size);
+        return at<ArenaHeader>(layout.regions[kRegionLocals].offset + slot * layout.geo.local_window_size);
     }
     // kWhereCommon or a slot number; nullptr when out of range.
     ArenaHeader* arena_for(std::uint32_t where) const {
         if (where == kWhereCommon) return common_arena();
         return where < slots() ? local_arena(where) : nullptr;
+    }
+    // The bytes an arena spans, [off, off + size), from the local layout.
+    std::uint32_t arena_offset(std::uint32_t where) const {
+        return where == kWhereCommon ? layout.regions[kRegionCommon].offset
+                                     : layout.regions[kRegionLocals].offset + where * layout.geo.local_window_size;
+    }
+    std::uint32_t arena_size(std::uint32_t where) const {
+        return where == kWhereCommon ? layout.geo.common_size : layout.geo.local_window_size;
     }
 };
 
@@ -64,6 +92,15 @@ struct Attachment : View {
     std::uint32_t token = 0;
     SlotKind kind = SlotKind::None;
     std::uint32_t* local_refs = nullptr;  // per registry entry: attaches by this process
+    // Per registry entry: what this process validated when it opened the
+    // object (offset 0: not open here). A data path resolves a handle
+    // through it, so it indexes the object with values no other process
+    // can change (a message queue keeps its geometry in `words`).
+    struct OpenObject {
+        std::uint32_t offset, kind;
+        std::uint32_t words[8];
+    };
+    OpenObject* objects = nullptr;
     char path[4096] = {};
 };
 
@@ -73,12 +110,38 @@ Attachment* current();
 
 // -------------------------------------------------------------- the file
 
+// The status of a shared structure that fails validation (a corrupt
+// file or object: a field out of range, an index outside its table, a
+// region that does not fit): -EBADMSG, as for a bad file header, with
+// chm_bp_last_error() naming the object and the field. Never a crash.
+inline constexpr int kCorrupt = -EBADMSG;
+
 // Why an operation failed, for chm_bp_last_error() (thread-local).
 void set_error(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
 
 // Check a header against the file's size before anything is trusted.
 // Returns 0 or -EBADMSG with `why` naming the field.
 int validate_header(const Header& h, std::uint64_t file_size, char* why, std::size_t n);
+
+// Validation beyond the header (validate.cpp). Each returns 0 or kCorrupt
+// with `why` naming the structure and field.
+// At attach: slot states and kinds, ring geometry, arena headers and every
+// committed registry entry's payload (inside its arena, no 32-bit wrap,
+// an allocated block): only what no live process changes mid-operation.
+int validate_structure(const View& v, char* why, std::size_t n);
+// Right after a join took `token` (a generation nobody had before): no
+// lock of the backplane's own may name it. One that does can only be
+// corrupt, and it would look held by a live process for ever (a recovery
+// waiting for the registry lock would never end).
+int validate_fresh_token(const View& v, std::uint32_t token, char* why, std::size_t n);
+// At an object's open: entry `index`'s payload as above and at least
+// `min_size` bytes; *off and *size receive the checked values.
+int entry_payload(const View& v, std::uint32_t index, std::uint32_t min_size, std::uint32_t* off,
+                  std::uint32_t* size, char* why, std::size_t n);
+// A whole file at rest (chm_bp_validate, chimera start and status):
+// validate_structure, every arena nobody holds, every live object by its
+// kind's validator. Read-only.
+int validate_file(const View& v, char* why, std::size_t n);
 
 // Open, validate and map a backplane file (read-write or read-only).
 // Nothing is left mapped or open on error; `why` names the problem.
@@ -156,8 +219,16 @@ inline constexpr std::uint64_t kInternalPollNs = 20'000;
 // ---------------------------------------------------------------- arenas
 
 void arena_init(const View& v, std::uint32_t off, std::uint32_t size);
-// Lock an arena (repairing it if its last holder died mid-change).
-// 0, -ETIMEDOUT, -ENOTRECOVERABLE (broken: its chain could not be walked).
+// With the lock held: is the arena one its operations can walk safely?
+// Header where the layout puts it, a chain of blocks that exactly fills
+// it (sizes, tags, prev sizes), a free list of its free blocks without a
+// cycle. 0, or kCorrupt with `why` naming the arena and field. arena_lock
+// runs it, so alloc and free only ever follow checked offsets.
+int arena_validate_locked(const View& v, const ArenaHeader* a, char* why, std::size_t n);
+// Lock an arena (repairing it if its last holder died mid-change) and
+// validate it (arena_validate_locked). 0, -ETIMEDOUT, -ENOTRECOVERABLE
+// (broken: its chain could not be walked), kCorrupt (set_error says why;
+// the lock is not held then).
 int arena_lock(const View& v, ArenaHeader* a, std::uint32_t me);
 void arena_unlock(ArenaHeader* a);
 // With the arena lock held: a payload offset (16-aligned) or 0 (no space).
@@ -284,6 +355,15 @@ void recover(const bp::View& v, std::uint32_t entry_index, std::uint32_t dead_sl
 void rsem_check(const bp::View& v, std::uint32_t off, std::uint32_t size, const char* name, bp::Report& r);
 namespace msgq {
 void check_entry(const bp::View& v, std::uint32_t off, std::uint32_t size, const char* name, bp::Report& r);
+}
+// Their validators of one live object at `off` (`size` bytes), read-only:
+// what its open checks, for validate_file. 0 or bp::kCorrupt with `why`
+// prefixed by `name`.
+int rsem_validate(const bp::View& v, std::uint32_t off, std::uint32_t size, const char* name, char* why,
+                  std::size_t n);
+namespace msgq {
+int validate_entry(const bp::View& v, std::uint32_t off, std::uint32_t size, const char* name, char* why,
+                   std::size_t n);
 }
 }  // namespace chm::ipc
 namespace chm::bp {

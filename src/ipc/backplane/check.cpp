@@ -54,9 +54,9 @@ void check_table(const View& v, Report& r, Summary* sum) {
             break;
         }
         const RingHeader* ring = v.ring(s);
-        if (ring->capacity != v.hdr()->geo.ring_records || ring->record_size != v.hdr()->geo.ring_record_size)
+        if (ring->capacity != v.geo().ring_records || ring->record_size != v.geo().ring_record_size)
             r.problem("ring[%u]: capacity %u x %u bytes, the header says %u x %u", s, ring->capacity, ring->record_size,
-                      v.hdr()->geo.ring_records, v.hdr()->geo.ring_record_size);
+                      v.geo().ring_records, v.geo().ring_record_size);
         std::snprintf(what, sizeof what, "ring[%u].lock", s);
         check_lock(v, ring->lock, what, r);
     }
@@ -70,7 +70,7 @@ bool payload_ok(const View& v, const RegistryEntry* e, std::uint32_t i, Report& 
         r.problem("registry[%u].where is %u: neither common memory nor a slot", i, where);
         return false;
     }
-    const std::uint32_t lo = v.off_of(a), hi = lo + a->size;
+    const std::uint32_t lo = v.off_of(a), hi = lo + v.arena_size(where);  // the layout's, not the file's
     if (off < lo + sizeof(ArenaHeader) || off >= hi || size == 0 || size > hi - off) {
         r.problem("registry[%u].offset %u size %u lies outside %s [%u, %u)", i, off, size,
                   where == kWhereCommon ? "common memory" : "its RTPU window", lo, hi);
@@ -97,7 +97,7 @@ void check_object(const View& v, const RegistryEntry* e, std::uint32_t i, const 
 }
 
 void check_registry(const View& v, Report& r, Summary* sum) {
-    const std::uint32_t cap = v.hdr()->geo.registry_capacity;
+    const std::uint32_t cap = v.geo().registry_capacity;
     std::uint32_t live_mask = 0;
     for (std::uint32_t s = 0; s < v.slots(); ++s) {
         const auto st = status_state(v.rtpu(s)->status.load(R));
@@ -171,6 +171,7 @@ void check_backplane(const View& v, Report& r, Summary* sum) {
     Summary local;
     if (!sum) sum = &local;
     const Header* h = v.hdr();
+    const Layout& l = v.layout;  // the validated copy
     check_table(v, r, sum);
     check_lock(v, h->registry_lock, "header.registry_lock", r);
     // A live holder may be in the middle of a change: check only a
@@ -180,17 +181,17 @@ void check_backplane(const View& v, Report& r, Summary* sum) {
     char name[48];
     const ArenaHeader* c = v.common_arena();
     check_lock(v, c->lock, "common.lock", r);
-    arena_check(v, c, h->regions[kRegionCommon].offset, h->geo.common_size, "common", r);
-    sum->common_size = h->geo.common_size - sizeof(ArenaHeader);
+    arena_check(v, c, l.regions[kRegionCommon].offset, l.geo.common_size, "common", r);
+    sum->common_size = l.geo.common_size - sizeof(ArenaHeader);
     sum->common_used = c->used_bytes.load(R);
     for (std::uint32_t s = 0; s < v.slots(); ++s) {
         const ArenaHeader* a = v.local_arena(s);
         std::snprintf(name, sizeof name, "local[%u].lock", s);
         check_lock(v, a->lock, name, r);
         std::snprintf(name, sizeof name, "local[%u]", s);
-        arena_check(v, a, h->regions[kRegionLocals].offset + s * h->geo.local_window_size, h->geo.local_window_size,
+        arena_check(v, a, l.regions[kRegionLocals].offset + s * l.geo.local_window_size, l.geo.local_window_size,
                     name, r);
-        sum->local_size += h->geo.local_window_size - sizeof(ArenaHeader);
+        sum->local_size += l.geo.local_window_size - sizeof(ArenaHeader);
         sum->local_used += a->used_bytes.load(R);
     }
 }

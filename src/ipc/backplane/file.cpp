@@ -187,6 +187,7 @@ int map_file(const char* path, bool writable, View* out, int* fd_out, char* why,
         } else {
             out->base = static_cast<char*>(p);
             out->size = h.file_size;
+            out->layout = layout_of(h);  // the validated copy: lookups never reread the file's header
         }
     }
     if (r != 0) {
@@ -327,6 +328,7 @@ int chm_bp_create(const char* path, const chm_bp_config_t* cfg) {
                 plan.ext[kExtGroupFlag] = kGroupMarker;
                 plan.ext[kExtGroupId] = std::uint32_t(c.group);
             }
+            v.layout = layout_of(plan);
             init_contents(v, plan);
             unmap(&v);
             r = publish(tmp, path);

@@ -87,7 +87,7 @@ void do_recover(const View& v, std::uint32_t slot, std::uint32_t gen) {
         }
     }
     registry_repair_locked(v, rt);
-    for (std::uint32_t i = 0; i < h->geo.registry_capacity; ++i) {
+    for (std::uint32_t i = 0; i < v.geo().registry_capacity; ++i) {
         RegistryEntry* e = v.entry(i);
         const auto st = static_cast<EntryState>(e->state.load(R));
         if (st == EntryState::Free) continue;

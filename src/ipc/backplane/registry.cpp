@@ -111,7 +111,7 @@ void registry_unlock(const View& v) { lock_release(&v.hdr()->registry_lock); }
 int registry_find_locked(const View& v, const char* name, std::uint32_t kind) {
     std::size_t len;
     if (!valid_name(name, &len)) return -ENOENT;
-    for (std::uint32_t i = 0; i < v.hdr()->geo.registry_capacity; ++i) {
+    for (std::uint32_t i = 0; i < v.geo().registry_capacity; ++i) {
         const RegistryEntry* e = v.entry(i);
         if (state_of(e) == EntryState::Live && name_is(e, name, len) &&
             (kind == kKindNone || e->kind.load(R) == kind))
@@ -121,7 +121,7 @@ int registry_find_locked(const View& v, const char* name, std::uint32_t kind) {
 }
 
 int registry_find_offset_locked(const View& v, std::uint32_t offset) {
-    for (std::uint32_t i = 0; i < v.hdr()->geo.registry_capacity; ++i) {
+    for (std::uint32_t i = 0; i < v.geo().registry_capacity; ++i) {
         const RegistryEntry* e = v.entry(i);
         if (state_of(e) != EntryState::Free && e->offset.load(R) == offset) return int(i);
     }
@@ -131,7 +131,7 @@ int registry_find_offset_locked(const View& v, std::uint32_t offset) {
 int registry_lookup(const View& v, const char* name, std::uint32_t kind, EntryInfo* out) {
     std::size_t len;
     if (!valid_name(name, &len)) return -ENOENT;
-    for (std::uint32_t i = 0; i < v.hdr()->geo.registry_capacity; ++i) {
+    for (std::uint32_t i = 0; i < v.geo().registry_capacity; ++i) {
         const RegistryEntry* e = v.entry(i);
         for (int tries = 0; tries < 100; ++tries) {
             const std::uint32_t s1 = e->seq.load(std::memory_order_acquire);
@@ -159,7 +159,7 @@ int registry_create_locked(const View& v, std::uint32_t me, std::uint32_t kind, 
     if (size == 0 || !a || kind == kKindNone || kind >= kKindMax || attach_slot >= v.slots()) return -EINVAL;
     if (registry_find_locked(v, name, kKindNone) >= 0) return -EEXIST;
     std::uint32_t i = 0;
-    const std::uint32_t cap = v.hdr()->geo.registry_capacity;
+    const std::uint32_t cap = v.geo().registry_capacity;
     while (i < cap && (state_of(v.entry(i)) != EntryState::Free || (v.entry(i)->seq.load(R) & 1))) ++i;
     if (i == cap) return -ENOSPC;
 
@@ -214,7 +214,10 @@ void registry_ref_locked(Attachment& a, std::uint32_t index) {
 int registry_unref_locked(Attachment& a, std::uint32_t offset, std::uint32_t kind) {
     const int i = registry_find_offset_locked(a, offset);
     if (i < 0 || a.entry(std::uint32_t(i))->kind.load(R) != kind || !a.local_refs[i]) return -EINVAL;
-    if (--a.local_refs[i] == 0) registry_detach_locked(a, std::uint32_t(i), a.slot, a.token);
+    if (--a.local_refs[i] == 0) {
+        a.objects[i] = Attachment::OpenObject{};  // its handles stop resolving here
+        registry_detach_locked(a, std::uint32_t(i), a.slot, a.token);
+    }
     return 0;
 }
 
@@ -227,7 +230,7 @@ void registry_detach_locked(const View& v, std::uint32_t i, std::uint32_t slot, 
 void registry_repair_locked(const View& v, std::uint32_t me) {
     Lock* rl = &v.hdr()->registry_lock;
     lock_mark_dirty(rl);
-    const std::uint32_t cap = v.hdr()->geo.registry_capacity;
+    const std::uint32_t cap = v.geo().registry_capacity;
     // Slots that are FREE or DEAD cannot have anything attached (a dead
     // slot is recovered before it is joined again).
     std::uint32_t gone = 0;

@@ -6,6 +6,8 @@
 // The handle is the queue's address in this process's mapping.
 #include <cerrno>
 #include <cstdint>
+#include <cstdio>
+#include <cstring>
 
 #include "chimera/bp.h"
 #include "chimera/msgq.h"
@@ -40,12 +42,48 @@ QueueHeader* queue_of(const Attachment* a, std::uint32_t index) {
 // it. With the registry lock held; true when it was removed.
 bool drop_stillborn_locked(Attachment* a, int index) {
     if (index < 0) return false;
+    std::uint32_t off, size;
+    char why[200];
+    if (entry_payload(*a, std::uint32_t(index), sizeof(QueueHeader), &off, &size, why, sizeof why)) return false;
     if (queue_of(a, std::uint32_t(index))->magic.load(std::memory_order_acquire) == chm::ipc::msgq::kMagic) return false;
     registry_destroy_locked(*a, std::uint32_t(index), a->token);
     return true;
 }
 
 const char* where_text(int where) { return where == CHM_MSGQ_COMMON ? "common memory" : "that RTPU's window"; }
+
+// This process opens queue entry `index` (registry lock held): check its
+// payload, geometry and, under its own lock, every index, then keep the
+// geometry in the process's record of the entry. 0, kCorrupt (set_error
+// names the queue and the field), or lock_queue's -EDEADLK. A broken
+// queue opens (so it can be inspected and destroyed); its calls fail.
+int open_locked(Attachment* a, std::uint32_t index, const char* fn, const char* name) {
+    std::uint32_t off = 0, size = 0;
+    char why[240];
+    int r = entry_payload(*a, index, sizeof(QueueHeader), &off, &size, why, sizeof why);
+    auto* q = a->at<QueueHeader>(off);
+    Geo g{};
+    if (r == 0) r = read_geometry(q, size, &g, why, sizeof why);
+    if (r == 0) {
+        r = lock_queue(*a, q, g, a->token);
+        if (r == 0) {
+            r = validate_locked(q, g, why, sizeof why);
+            if (r == 0) q->entry.store(index, R);  // queues created by older builds carry no index
+            unlock_queue(q);
+        } else if (r == -ENOTRECOVERABLE) {
+            q->entry.store(index, R);
+            r = 0;
+        } else {
+            return r;  // lock_queue said why
+        }
+    }
+    if (r) return set_error("%s: message queue \"%s\" (registry[%u]): %s", fn, name, index, why), r;
+    Attachment::OpenObject& o = a->objects[index];
+    std::memcpy(o.words, &g, sizeof g);
+    o.kind = kKindMsgQueue;
+    o.offset = off;
+    return 0;
+}
 
 }  // namespace
 
@@ -111,7 +149,15 @@ static int msgq_create_impl(const char* name, const chm_msgq_attr_t* attr_in, in
         r = registry_create_locked(*a, a->token, kKindMsgQueue, name, size, at, a->slot, &info);
     if (r == 0) {
         auto* q = a->at<QueueHeader>(info.offset);
+        q->entry.store(info.index, R);
         queue_init(q, order, attr.max_msg, attr.max_count, max_bytes, waiters);
+        Geo g;
+        char why[200];
+        read_geometry(q, size, &g, why, sizeof why);  // just written: cannot fail
+        Attachment::OpenObject& o = a->objects[info.index];
+        std::memcpy(o.words, &g, sizeof g);
+        o.kind = kKindMsgQueue;
+        o.offset = info.offset;
         a->local_refs[info.index] = 1;
         *out = reinterpret_cast<chm_msgq_t*>(q);
     }
@@ -122,8 +168,14 @@ static int msgq_create_impl(const char* name, const chm_msgq_attr_t* attr_in, in
     case -EEXIST: set_error("chm_msgq_create: the name \"%s\" is taken", name); break;
     case -ENAMETOOLONG: set_error("chm_msgq_create: name longer than %u", kNameMax); break;
     case -ENOMEM: set_error("chm_msgq_create %s: no %u free bytes in %s", name, size, where_text(where)); break;
-    case -ENOSPC: set_error("chm_msgq_create %s: the registry is full (%u entries)", name, a->hdr()->geo.registry_capacity); break;
+    case -ENOSPC: set_error("chm_msgq_create %s: the registry is full (%u entries)", name, a->geo().registry_capacity); break;
     case -ENOTRECOVERABLE: set_error("chm_msgq_create %s: %s was damaged by a process that died in it", name, where_text(where)); break;
+    case -EBADMSG: {  // a corrupt arena: its check said which field
+        char why[400];
+        std::snprintf(why, sizeof why, "%s", chm_bp_last_error());
+        set_error("chm_msgq_create %s: %s", name, why);
+        break;
+    }
     default: set_error("chm_msgq_create %s: error %d", name, r); break;
     }
     return r;
@@ -137,14 +189,24 @@ static int msgq_open_impl(const char* name, chm_msgq_t** out) {
     int r = lock_registry(a, "chm_msgq_open");
     if (r) return r;
     int i = registry_find_locked(*a, name, kKindMsgQueue);
-    if (drop_stillborn_locked(a, i)) i = -ENOENT;
     if (i >= 0) {
+        std::uint32_t off, size;
+        char why[240];
+        // The payload first: the stillborn check reads the queue's magic.
+        r = entry_payload(*a, std::uint32_t(i), sizeof(QueueHeader), &off, &size, why, sizeof why);
+        if (r) {
+            registry_unlock(*a);
+            return set_error("chm_msgq_open: message queue \"%s\": %s", name, why), r;
+        }
+    }
+    if (drop_stillborn_locked(a, i)) i = -ENOENT;
+    if (i >= 0 && (r = open_locked(a, std::uint32_t(i), "chm_msgq_open", name)) == 0) {
         registry_ref_locked(*a, std::uint32_t(i));
         *out = reinterpret_cast<chm_msgq_t*>(queue_of(a, std::uint32_t(i)));
     }
     registry_unlock(*a);
     if (i < 0) return set_error("chm_msgq_open: no message queue \"%s\"", name), -ENOENT;
-    return 0;
+    return r;
 }
 
 static int msgq_close_impl(chm_msgq_t* q) {
@@ -171,15 +233,23 @@ static int msgq_destroy_impl(const char* name) {
     const int i = registry_find_locked(*a, name, kKindMsgQueue);
     WakeBuf<CHM_MSGQ_WAITERS_MAX> wakes;
     if (i >= 0) {
-        QueueHeader* q = queue_of(a, std::uint32_t(i));
-        if (q->magic.load(std::memory_order_acquire) == chm::ipc::msgq::kMagic) {
+        std::uint32_t off = 0, size = 0;
+        char why[200];
+        Geo g;
+        // A corrupt entry or queue is removed from the registry without
+        // following anything in it (nobody can be blocked in it: its
+        // open fails).
+        const bool sound = entry_payload(*a, std::uint32_t(i), sizeof(QueueHeader), &off, &size, why, sizeof why) == 0 &&
+                           read_geometry(a->at<QueueHeader>(off), size, &g, why, sizeof why) == 0;
+        QueueHeader* q = sound ? a->at<QueueHeader>(off) : nullptr;
+        if (q && q->magic.load(std::memory_order_acquire) == chm::ipc::msgq::kMagic) {
             // Blocked callers learn of it now (-EIDRM), not never. A broken
             // queue has no one to wake but is destroyed all the same.
-            r = lock_queue(*a, q, a->token);
+            r = lock_queue(*a, q, g, a->token);
             if (r == 0) {
                 lock_mark_dirty(&q->lock);
                 q->destroyed.store(1, R);
-                grant_all_locked(q, &wakes);
+                grant_all_locked(q, g, &wakes);
                 lock_clear_dirty(&q->lock);
                 unlock_queue(q);
             } else if (r == -ENOTRECOVERABLE) {
@@ -202,13 +272,16 @@ static int msgq_info_impl(chm_msgq_t* h, chm_msgq_info_t* out) {
     if (!out || !p || p < a->base || std::uint32_t(p - a->base) > a->size - sizeof(QueueHeader))
         return set_error("chm_msgq_info: NULL out or not a queue"), -EINVAL;
     const auto* q = reinterpret_cast<const QueueHeader*>(p);
-    if (q->magic.load(std::memory_order_acquire) != chm::ipc::msgq::kMagic)
-        return set_error("chm_msgq_info: %p is not a message queue", static_cast<const void*>(p)), -EINVAL;
-    out->attr.order = chm_msgq_order(q->order);
-    out->attr.max_msg = q->max_msg;
-    out->attr.max_count = q->max_count;
-    out->attr.max_bytes = q->max_bytes;
-    out->attr.max_waiters = q->max_waiters;
+    const std::uint32_t e = q->entry.load(R);
+    if (e >= a->geo().registry_capacity || a->objects[e].offset != a->off_of(p) || a->objects[e].kind != kKindMsgQueue)
+        return set_error("chm_msgq_info: %p is not a message queue open in this process", static_cast<const void*>(p)), -EINVAL;
+    Geo g;
+    std::memcpy(&g, a->objects[e].words, sizeof g);  // the geometry its open checked
+    out->attr.order = chm_msgq_order(g.order);
+    out->attr.max_msg = g.max_msg;
+    out->attr.max_count = g.max_count;
+    out->attr.max_bytes = g.max_bytes;
+    out->attr.max_waiters = g.max_waiters;
     out->count = q->count.load(R);
     out->bytes = q->bytes.load(R);
     out->receivers_waiting = q->recv_waiting.load(R);

@@ -72,7 +72,8 @@ struct QueueHeader {
     A32 level_mask;             // derived: bit l = list l not empty
     A32 sent, received;         // statistics
     A32 repairs;                // rebuilds after a dead holder
-    std::uint32_t reserved[5];
+    A32 entry;                  // its registry index (written at create and open): finds Geo
+    std::uint32_t reserved[4];
     A32 head[kLevels];          // derived: per level (FIFO/LIFO use level 0)
     A32 tail[kLevels];
 };
@@ -120,24 +121,37 @@ inline void clear_bits(A32& a, std::uint32_t bits) {
     a.store(a.load(std::memory_order_relaxed) & ~bits, std::memory_order_relaxed);
 }
 
-inline MsgSlot* slot_at(QueueHeader* q, std::uint32_t i) {
-    return reinterpret_cast<MsgSlot*>(reinterpret_cast<char*>(q) + q->slots_off + i * q->slot_size);
+// A queue's geometry, copied out of its header and validated (read_geometry):
+// slots and records are addressed with this process-local copy only, so a
+// header changed in shared memory after the check cannot move an access
+// outside the queue. Kept per open queue in Attachment::objects.
+struct Geo {
+    std::uint32_t order, max_msg, max_count, max_bytes, slot_size, max_waiters, slots_off, waiters_off;
+};
+static_assert(sizeof(Geo) == sizeof(bp::Attachment::OpenObject::words));
+
+inline MsgSlot* slot_at(QueueHeader* q, const Geo& g, std::uint32_t i) {
+    return reinterpret_cast<MsgSlot*>(reinterpret_cast<char*>(q) + g.slots_off + std::size_t(i) * g.slot_size);
 }
 inline char* payload_of(MsgSlot* s) { return reinterpret_cast<char*>(s + 1); }
-inline Waiter* waiter_at(QueueHeader* q, std::uint32_t i) {
-    return reinterpret_cast<Waiter*>(reinterpret_cast<char*>(q) + q->waiters_off) + i;
+inline Waiter* waiter_at(QueueHeader* q, const Geo& g, std::uint32_t i) {
+    return reinterpret_cast<Waiter*>(reinterpret_cast<char*>(q) + g.waiters_off) + i;
 }
-inline std::uint32_t level_of(const QueueHeader* q, std::uint32_t prio) {
-    return q->order == kPriority ? prio : 0;
-}
+inline std::uint32_t level_of(const Geo& g, std::uint32_t prio) { return g.order == kPriority ? prio : 0; }
 
 // Bytes a queue of these limits needs, or 0 when it does not fit in 4 GiB.
 std::uint32_t queue_size(std::uint32_t max_msg, std::uint32_t max_count, std::uint32_t max_waiters);
 // Lay out an (all-zero) queue; magic is written last.
 void queue_init(QueueHeader* q, std::uint32_t order, std::uint32_t max_msg, std::uint32_t max_count,
                 std::uint32_t max_bytes, std::uint32_t max_waiters);
-// Is the header's geometry consistent with `payload_size` bytes?
-bool geometry_ok(const QueueHeader* q, std::uint32_t payload_size);
+// Copy the header's geometry into *g and check the copy against
+// `payload_size` bytes: 0, or bp::kCorrupt with `why` naming the field.
+int read_geometry(const QueueHeader* q, std::uint32_t payload_size, Geo* g, char* why, std::size_t n);
+// With the lock held (or a quiescent file): every index and record of the
+// queue against `g` (lists, free list, tails, mask, counters, slot states,
+// lengths and priorities, waiter states). 0, or bp::kCorrupt with `why`
+// naming the field. Bounded: O(max_count + max_waiters).
+int validate_locked(QueueHeader* q, const Geo& g, char* why, std::size_t n);
 
 // A wake-up to deliver after the lock is released.
 struct Wake {
@@ -163,22 +177,22 @@ struct WakeBuf : Wakes {
 // Lock the queue for `me`. A lock robbed from a dead holder that left the
 // queue mid-change is rebuilt first. 0; -EDEADLK a live holder kept it
 // past the bound; -ENOTRECOVERABLE broken (the lock is not held then).
-int lock_queue(const bp::View& v, QueueHeader* q, std::uint32_t me);
+int lock_queue(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t me);
 void unlock_queue(QueueHeader* q);
 
 // With the lock held: grant the most urgent ungranted waiter of `state`
 // (kWaiterRecv or kWaiterSend), freeing records of dead waiters met on
 // the way. Adds the wake-up to `out`; false when nobody was waiting.
-bool grant_one_locked(const bp::View& v, QueueHeader* q, std::uint32_t state, Wakes* out);
+bool grant_one_locked(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t state, Wakes* out);
 // Grant every waiter (destroy).
-void grant_all_locked(QueueHeader* q, Wakes* out);
+void grant_all_locked(QueueHeader* q, const Geo& g, Wakes* out);
 // Free the records of a dead slot's waiters, passing on any grant they
 // held so no message or room is left with waiters asleep.
-void purge_token_locked(const bp::View& v, QueueHeader* q, std::uint32_t token, Wakes* out);
+void purge_token_locked(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t token, Wakes* out);
 
 // Rebuild every derived field from the slots (lock held, dirty). False,
 // and the queue marked broken, when a slot or the header is damaged.
-bool rebuild_locked(QueueHeader* q);
+bool rebuild_locked(QueueHeader* q, const Geo& g);
 
 // The recovery callback of kKindMsgQueue (bp::register_recovery); also
 // the line for kBuiltinRecovery in backplane/recovery.cpp.
@@ -191,5 +205,7 @@ void ensure_recovery_registered();
 // Report line per problem, prefixed with `name`.
 void check_queue(const bp::View& v, const QueueHeader* q, std::uint32_t payload_size,
                  const char* name, bp::Report& r);
+// The header's messages, for errors: "message queue at offset N".
+void set_corrupt(const bp::View& v, const QueueHeader* q, const char* fmt, ...) __attribute__((format(printf, 3, 4)));
 
 }  // namespace chm::ipc::msgq

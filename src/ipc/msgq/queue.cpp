@@ -41,14 +41,25 @@ void free_record_locked(QueueHeader* q, Waiter* w) {
     bump(waiting_of(q, st), std::uint32_t(-1));
 }
 
-bool has_room(const QueueHeader* q, std::uint32_t len) {
-    return q->free_head.load(R) != kNil && q->bytes.load(R) + len <= q->max_bytes;
+bool has_room(const QueueHeader* q, const Geo& g, std::uint32_t len) {
+    return q->free_head.load(R) != kNil && q->bytes.load(R) + len <= g.max_bytes;
 }
 
-void put_locked(QueueHeader* q, std::uint32_t sender, std::uint32_t type, std::uint32_t prio,
-                const void* data, std::uint32_t len) {
+// The data path reads two kinds of index from shared memory: list heads
+// and tails, and the free list's head. Each is bounded by one compare
+// against the process-local slot count before it addresses a slot (a
+// slot's `next` is only followed by becoming one of them).
+int put_locked(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t sender, std::uint32_t type,
+               std::uint32_t prio, const void* data, std::uint32_t len) {
     const std::uint32_t i = q->free_head.load(R);
-    MsgSlot* s = slot_at(q, i);
+    const std::uint32_t l = level_of(g, prio);
+    const std::uint32_t t = q->tail[l].load(R);
+    if (i >= g.max_count || (t != kNil && t >= g.max_count)) [[unlikely]] {
+        set_corrupt(v, q, i >= g.max_count ? "free_head is %u, outside its %u slots" : "tail is %u, outside its %u slots",
+                    i >= g.max_count ? i : t, g.max_count);
+        return bp::kCorrupt;
+    }
+    MsgSlot* s = slot_at(q, g, i);
     q->free_head.store(s->next.load(R), R);
     s->type.store(type, R);
     s->len.store(len, R);
@@ -57,28 +68,28 @@ void put_locked(QueueHeader* q, std::uint32_t sender, std::uint32_t type, std::u
     s->sender.store(sender, R);
     if (len) std::memcpy(payload_of(s), data, len);
     s->state.store(kSlotQueued, std::memory_order_release);  // committed
-    const std::uint32_t l = level_of(q, prio);
-    if (q->order == kLifo) {
+    if (g.order == kLifo) {
         s->next.store(q->head[l].load(R), R);
         if (q->head[l].load(R) == kNil) q->tail[l].store(i, R);
         q->head[l].store(i, R);
     } else {
         s->next.store(kNil, R);
-        const std::uint32_t t = q->tail[l].load(R);
         if (t == kNil) q->head[l].store(i, R);
-        else slot_at(q, t)->next.store(i, R);
+        else slot_at(q, g, t)->next.store(i, R);
         q->tail[l].store(i, R);
     }
     set_bits(q->level_mask, 1u << l);
     bump(q->count, 1);
     bump(q->bytes, len);
     bump(q->sent, 1);
+    return 0;
 }
 
 // The next message's slot index (the queue is not empty).
-std::uint32_t next_index(const QueueHeader* q, std::uint32_t* level) {
+std::uint32_t next_index(const QueueHeader* q, const Geo& g, std::uint32_t* level) {
     const std::uint32_t mask = q->level_mask.load(R);
-    const std::uint32_t l = q->order == kPriority ? 31u - std::uint32_t(__builtin_clz(mask)) : 0u;
+    // mask | 1: a corrupt empty mask gives level 0, whose head is bounded.
+    const std::uint32_t l = g.order == kPriority ? 31u - std::uint32_t(__builtin_clz(mask | 1u)) : 0u;
     *level = l;
     return q->head[l].load(R);
 }
@@ -92,11 +103,20 @@ void fill_info(MsgSlot* s, chm_msgq_msg_info_t* info) {
 }
 
 // Take the next message into buf: its length, or -EMSGSIZE (left queued).
-int get_locked(QueueHeader* q, void* buf, std::size_t size, chm_msgq_msg_info_t* info) {
+int get_locked(const bp::View& v, QueueHeader* q, const Geo& g, void* buf, std::size_t size,
+               chm_msgq_msg_info_t* info) {
     std::uint32_t l;
-    const std::uint32_t i = next_index(q, &l);
-    MsgSlot* s = slot_at(q, i);
+    const std::uint32_t i = next_index(q, g, &l);
+    if (i >= g.max_count) [[unlikely]] {
+        set_corrupt(v, q, "head[%u] is %u, outside its %u slots", l, i, g.max_count);
+        return bp::kCorrupt;
+    }
+    MsgSlot* s = slot_at(q, g, i);
     const std::uint32_t len = s->len.load(R);
+    if (len > g.max_msg) [[unlikely]] {
+        set_corrupt(v, q, "slot %u: len %u above max_msg %u", i, len, g.max_msg);
+        return bp::kCorrupt;
+    }
     fill_info(s, info);
     if (len > size) return -EMSGSIZE;
     const std::uint32_t next = s->next.load(R);
@@ -128,10 +148,10 @@ WaiterId recorded(const Waiter* w) { return WaiterId{w->task.load(R), w->urgency
 
 // A free record for the caller, its word at `initial_word` (wait_word_initial),
 // or nullptr (all taken: the caller polls).
-Waiter* register_locked(QueueHeader* q, std::uint32_t state, std::uint32_t me, WaiterId who,
+Waiter* register_locked(QueueHeader* q, const Geo& g, std::uint32_t state, std::uint32_t me, WaiterId who,
                         std::int32_t prio, std::uint32_t initial_word) {
-    for (std::uint32_t i = 0; i < q->max_waiters; ++i) {
-        Waiter* w = waiter_at(q, i);
+    for (std::uint32_t i = 0; i < g.max_waiters; ++i) {
+        Waiter* w = waiter_at(q, g, i);
         if (w->state.load(R) != kWaiterFree) continue;
         std::uint32_t t = bump(q->next_ticket, 1);
         while (!kernel::word_granted(t)) t = bump(q->next_ticket, 1);  // a grant value
@@ -148,13 +168,23 @@ Waiter* register_locked(QueueHeader* q, std::uint32_t state, std::uint32_t me, W
     return nullptr;
 }
 
-QueueHeader* handle_queue(const bp::Attachment* a, chm_msgq_t* h) {
+// A handle is the queue's address; it resolves through the process's
+// record of the queue's open (Attachment::objects, found by the entry
+// index the header carries, itself bounded by the local registry size):
+// the geometry the open validated, or nullptr for anything this process
+// has not opened.
+QueueHeader* handle_queue(const bp::Attachment* a, chm_msgq_t* h, const Geo** g) {
     const char* p = reinterpret_cast<const char*>(h);
     if (!p || p < a->base || std::uint32_t(p - a->base) > a->size - sizeof(QueueHeader) ||
         (std::uint32_t(p - a->base) & 15) != 0)
         return nullptr;
     auto* q = reinterpret_cast<QueueHeader*>(const_cast<char*>(p));
-    return q->magic.load(std::memory_order_acquire) == kMagic ? q : nullptr;
+    const std::uint32_t e = q->entry.load(R);
+    if (e >= a->geo().registry_capacity) return nullptr;
+    const bp::Attachment::OpenObject& o = a->objects[e];
+    if (o.offset != std::uint32_t(p - a->base) || o.kind != bp::kKindMsgQueue) return nullptr;
+    *g = reinterpret_cast<const Geo*>(o.words);
+    return q;
 }
 
 int bad_handle(const char* fn, chm_msgq_t* h) {
@@ -168,10 +198,9 @@ struct SendOp {
     static constexpr std::uint32_t kMine = kWaiterSend, kOther = kWaiterRecv;
     std::uint32_t sender, type, prio, len;
     const void* data;
-    bool ready(const QueueHeader* q) const { return has_room(q, len); }
-    int act(QueueHeader* q) const {
-        put_locked(q, sender, type, prio, data, len);
-        return 0;
+    bool ready(const QueueHeader* q, const Geo& g) const { return has_room(q, g, len); }
+    int act(const bp::View& v, QueueHeader* q, const Geo& g) const {
+        return put_locked(v, q, g, sender, type, prio, data, len);
     }
 };
 
@@ -180,21 +209,21 @@ struct RecvOp {
     void* buf;
     std::size_t size;
     chm_msgq_msg_info_t* info;
-    bool ready(const QueueHeader* q) const { return q->count.load(R) != 0; }
-    int act(QueueHeader* q) const { return get_locked(q, buf, size, info); }
+    bool ready(const QueueHeader* q, const Geo&) const { return q->count.load(R) != 0; }
+    int act(const bp::View& v, QueueHeader* q, const Geo& g) const { return get_locked(v, q, g, buf, size, info); }
 };
 
 // The whole operation, lock to unlock.
 template <class Op>
-int run(const bp::Attachment* a, QueueHeader* q, const Op& op, std::int64_t timeout_ns) {
-    int r = lock_queue(*a, q, a->token);
+int run(const bp::Attachment* a, QueueHeader* q, const Geo& g, const Op& op, std::int64_t timeout_ns) {
+    int r = lock_queue(*a, q, g, a->token);
     if (r) return r;
     WakeBuf<2> wakes;
     // The path that needs no wait.
-    if (!q->destroyed.load(R) && op.ready(q)) {
+    if (!q->destroyed.load(R) && op.ready(q, g)) {
         bp::lock_mark_dirty(&q->lock);
-        r = op.act(q);
-        if (r >= 0 && waiting_of(q, Op::kOther).load(R)) grant_one_locked(*a, q, Op::kOther, &wakes);
+        r = op.act(*a, q, g);
+        if (r >= 0 && waiting_of(q, Op::kOther).load(R)) grant_one_locked(*a, q, g, Op::kOther, &wakes);
         bp::lock_clear_dirty(&q->lock);
         unlock_queue(q);
         wakes.deliver();
@@ -211,10 +240,10 @@ int run(const bp::Attachment* a, QueueHeader* q, const Op& op, std::int64_t time
             r = -EIDRM;
             break;
         }
-        if (op.ready(q)) {
+        if (op.ready(q, g)) {
             bp::lock_mark_dirty(&q->lock);
-            r = op.act(q);
-            if (r >= 0 && waiting_of(q, Op::kOther).load(R)) grant_one_locked(*a, q, Op::kOther, &wakes);
+            r = op.act(*a, q, g);
+            if (r >= 0 && waiting_of(q, Op::kOther).load(R)) grant_one_locked(*a, q, g, Op::kOther, &wakes);
             bp::lock_clear_dirty(&q->lock);
             break;
         }
@@ -233,7 +262,7 @@ int run(const bp::Attachment* a, QueueHeader* q, const Op& op, std::int64_t time
         }
         const std::uint32_t initial = wait_word_initial();
         bp::lock_mark_dirty(&q->lock);
-        Waiter* w = register_locked(q, Op::kMine, a->token, who, prio, initial);
+        Waiter* w = register_locked(q, g, Op::kMine, a->token, who, prio, initial);
         const std::uint32_t ticket = w ? w->ticket.load(R) : 0;
         bp::lock_clear_dirty(&q->lock);
         unlock_queue(q);
@@ -245,7 +274,7 @@ int run(const bp::Attachment* a, QueueHeader* q, const Op& op, std::int64_t time
             bp::relinquish(std::uint64_t(nap));
             wr = 0;
         }
-        if ((r = lock_queue(*a, q, a->token)) != 0) return r;
+        if ((r = lock_queue(*a, q, g, a->token)) != 0) return r;
         if (w && w->ticket.load(R) == ticket && w->token.load(R) == a->token) {
             bp::lock_mark_dirty(&q->lock);
             free_record_locked(q, w);
@@ -259,9 +288,9 @@ int run(const bp::Attachment* a, QueueHeader* q, const Op& op, std::int64_t time
     }
     // Leaving without acting while the condition holds: a grant this
     // caller may have taken passes to the next waiter of its direction.
-    if (r < 0 && r != -EIDRM && op.ready(q) && waiting_of(q, Op::kMine).load(R)) {
+    if (r < 0 && r != -EIDRM && r != bp::kCorrupt && op.ready(q, g) && waiting_of(q, Op::kMine).load(R)) {
         bp::lock_mark_dirty(&q->lock);
-        grant_one_locked(*a, q, Op::kMine, &wakes);
+        grant_one_locked(*a, q, g, Op::kMine, &wakes);
         bp::lock_clear_dirty(&q->lock);
     }
     unlock_queue(q);
@@ -273,26 +302,28 @@ int send_common(const char* fn, chm_msgq_t* h, std::uint32_t type, std::uint32_t
                 std::size_t len, std::int64_t timeout_ns) {
     bp::Attachment* a = bp::current();
     if (!a) return bp::set_error("%s: not attached to a backplane", fn), -ENOTCONN;
-    QueueHeader* q = handle_queue(a, h);
+    const Geo* g;
+    QueueHeader* q = handle_queue(a, h, &g);
     if (!q) return bad_handle(fn, h);
     if (prio > CHM_MSGQ_PRIO_MAX || (!data && len))
         return bp::set_error("%s: priority %u above %d, or NULL data", fn, prio, CHM_MSGQ_PRIO_MAX), -EINVAL;
-    if (len > q->max_msg || len > q->max_bytes)
+    if (len > g->max_msg || len > g->max_bytes)
         return bp::set_error("%s: %zu bytes, the queue takes at most %u", fn, len,
-                             q->max_msg < q->max_bytes ? q->max_msg : q->max_bytes), -EMSGSIZE;
+                             g->max_msg < g->max_bytes ? g->max_msg : g->max_bytes), -EMSGSIZE;
     const SendOp op{a->slot, type, prio, std::uint32_t(len), data};
-    return run(a, q, op, timeout_ns);
+    return run(a, q, *g, op, timeout_ns);
 }
 
 int recv_common(const char* fn, chm_msgq_t* h, void* buf, std::size_t size, chm_msgq_msg_info_t* info,
                 std::int64_t timeout_ns) {
     bp::Attachment* a = bp::current();
     if (!a) return bp::set_error("%s: not attached to a backplane", fn), -ENOTCONN;
-    QueueHeader* q = handle_queue(a, h);
+    const Geo* g;
+    QueueHeader* q = handle_queue(a, h, &g);
     if (!q) return bad_handle(fn, h);
     if (!buf && size) return bp::set_error("%s: NULL buffer", fn), -EINVAL;
     const RecvOp op{buf, size, info};
-    return run(a, q, op, timeout_ns);
+    return run(a, q, *g, op, timeout_ns);
 }
 
 }  // namespace
@@ -312,7 +343,7 @@ void Wakes::deliver() {
     n = 0;
 }
 
-int lock_queue(const bp::View& v, QueueHeader* q, std::uint32_t me) {
+int lock_queue(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t me) {
     const int r = bp::lock_acquire(v, &q->lock, me, kLockPollNs, bp::kInternalTimeoutNs);
     if (r == -ETIMEDOUT) {
         bp::set_error("message queue: its lock was held past %llu ms by a live peer",
@@ -321,7 +352,7 @@ int lock_queue(const bp::View& v, QueueHeader* q, std::uint32_t me) {
     }
     if (r == -EOWNERDEAD) {
         // The holder died: rebuild what it may have left half-changed.
-        if (q->lock.dirty.load(std::memory_order_acquire) && !q->broken.load(R)) rebuild_locked(q);
+        if (q->lock.dirty.load(std::memory_order_acquire) && !q->broken.load(R)) rebuild_locked(q, g);
         bp::lock_clear_dirty(&q->lock);
     }
     if (q->broken.load(R)) {
@@ -334,10 +365,10 @@ int lock_queue(const bp::View& v, QueueHeader* q, std::uint32_t me) {
 
 void unlock_queue(QueueHeader* q) { bp::lock_release(&q->lock); }
 
-bool grant_one_locked(const bp::View& v, QueueHeader* q, std::uint32_t state, Wakes* out) {
+bool grant_one_locked(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t state, Wakes* out) {
     Waiter* best = nullptr;
-    for (std::uint32_t i = 0; i < q->max_waiters; ++i) {
-        Waiter* w = waiter_at(q, i);
+    for (std::uint32_t i = 0; i < g.max_waiters; ++i) {
+        Waiter* w = waiter_at(q, g, i);
         if (w->state.load(R) != state || w->word.load(R) == w->ticket.load(R)) continue;
         if (!bp::token_alive(v, w->token.load(R), false)) {
             free_record_locked(q, w);  // its process died; recovery has not run yet
@@ -352,9 +383,9 @@ bool grant_one_locked(const bp::View& v, QueueHeader* q, std::uint32_t state, Wa
     return true;
 }
 
-void grant_all_locked(QueueHeader* q, Wakes* out) {
-    for (std::uint32_t i = 0; i < q->max_waiters; ++i) {
-        Waiter* w = waiter_at(q, i);
+void grant_all_locked(QueueHeader* q, const Geo& g, Wakes* out) {
+    for (std::uint32_t i = 0; i < g.max_waiters; ++i) {
+        Waiter* w = waiter_at(q, g, i);
         if (w->state.load(R) == kWaiterFree) continue;
         const std::uint32_t t = w->ticket.load(R);
         if (!store_grant(word_of(w->word), t))
@@ -362,10 +393,10 @@ void grant_all_locked(QueueHeader* q, Wakes* out) {
     }
 }
 
-void purge_token_locked(const bp::View& v, QueueHeader* q, std::uint32_t token, Wakes* out) {
+void purge_token_locked(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t token, Wakes* out) {
     std::uint32_t passed[2] = {0, 0};  // grants the dead held: receivers, senders
-    for (std::uint32_t i = 0; i < q->max_waiters; ++i) {
-        Waiter* w = waiter_at(q, i);
+    for (std::uint32_t i = 0; i < g.max_waiters; ++i) {
+        Waiter* w = waiter_at(q, g, i);
         const std::uint32_t st = w->state.load(R);
         if (st == kWaiterFree || w->token.load(R) != token) continue;
         if (w->word.load(R) == w->ticket.load(R)) ++passed[st == kWaiterRecv ? 0 : 1];
@@ -374,9 +405,9 @@ void purge_token_locked(const bp::View& v, QueueHeader* q, std::uint32_t token, 
     // Each grant a dead waiter took and never used goes to a live one, as
     // long as there is something to take (messages) or room to send into.
     for (std::uint32_t k = 0; k < passed[0] && q->count.load(R) != 0; ++k)
-        if (!grant_one_locked(v, q, kWaiterRecv, out)) break;
+        if (!grant_one_locked(v, q, g, kWaiterRecv, out)) break;
     for (std::uint32_t k = 0; k < passed[1] && q->free_head.load(R) != kNil; ++k)
-        if (!grant_one_locked(v, q, kWaiterSend, out)) break;
+        if (!grant_one_locked(v, q, g, kWaiterSend, out)) break;
 }
 
 }  // namespace chm::ipc::msgq

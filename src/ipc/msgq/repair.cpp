@@ -25,9 +25,10 @@ std::uint32_t round16(std::uint32_t n) { return (n + 15u) & ~15u; }
 
 // Older first (FIFO, and FIFO among equal priorities) or newer first (LIFO).
 struct Age {
+    const Geo& g;
     std::uint32_t now;
     bool newest_first;
-    std::uint32_t of(QueueHeader* q, std::uint32_t i) const { return now - slot_at(q, i)->seq.load(R); }
+    std::uint32_t of(QueueHeader* q, std::uint32_t i) const { return now - slot_at(q, g, i)->seq.load(R); }
     bool before(QueueHeader* q, std::uint32_t a, std::uint32_t b) const {
         return newest_first ? of(q, a) < of(q, b) : of(q, a) > of(q, b);
     }
@@ -46,25 +47,25 @@ std::uint32_t sort_list(QueueHeader* q, std::uint32_t head, const Age& age, std:
             std::uint32_t qq = p, psize = 0;
             for (std::uint32_t i = 0; i < insize && qq != kNil; ++i) {
                 ++psize;
-                qq = slot_at(q, qq)->next.load(R);
+                qq = slot_at(q, age.g, qq)->next.load(R);
             }
             std::uint32_t qsize = insize;
             while (psize > 0 || (qsize > 0 && qq != kNil)) {
                 std::uint32_t e;
                 if (psize == 0) {
-                    e = qq, qq = slot_at(q, qq)->next.load(R), --qsize;
+                    e = qq, qq = slot_at(q, age.g, qq)->next.load(R), --qsize;
                 } else if (qsize == 0 || qq == kNil || !age.before(q, qq, p)) {
-                    e = p, p = slot_at(q, p)->next.load(R), --psize;
+                    e = p, p = slot_at(q, age.g, p)->next.load(R), --psize;
                 } else {
-                    e = qq, qq = slot_at(q, qq)->next.load(R), --qsize;
+                    e = qq, qq = slot_at(q, age.g, qq)->next.load(R), --qsize;
                 }
                 if (tail == kNil) head = e;
-                else slot_at(q, tail)->next.store(e, R);
+                else slot_at(q, age.g, tail)->next.store(e, R);
                 tail = e;
             }
             p = qq;
         }
-        slot_at(q, tail)->next.store(kNil, R);
+        slot_at(q, age.g, tail)->next.store(kNil, R);
         if (merges <= 1) {
             *tail_out = tail;
             return head;
@@ -101,8 +102,9 @@ void queue_init(QueueHeader* q, std::uint32_t order, std::uint32_t max_msg, std:
         q->head[l].store(kNil, R);
         q->tail[l].store(kNil, R);
     }
+    const Geo g{order, max_msg, max_count, max_bytes, q->slot_size, max_waiters, q->slots_off, q->waiters_off};
     for (std::uint32_t i = 0; i < max_count; ++i) {
-        MsgSlot* s = slot_at(q, i);
+        MsgSlot* s = slot_at(q, g, i);
         s->state.store(kSlotFree, R);
         s->next.store(i + 1 < max_count ? i + 1 : kNil, R);
     }
@@ -111,26 +113,13 @@ void queue_init(QueueHeader* q, std::uint32_t order, std::uint32_t max_msg, std:
     q->magic.store(kMagic, std::memory_order_release);
 }
 
-bool geometry_ok(const QueueHeader* q, std::uint32_t payload_size) {
-    return q->order <= kPriority && q->max_msg >= 1 && q->max_msg <= CHM_MSGQ_MSG_MAX && q->max_count >= 1 &&
-           q->max_count <= CHM_MSGQ_COUNT_MAX && q->max_waiters >= 1 && q->max_waiters <= CHM_MSGQ_WAITERS_MAX &&
-           q->max_bytes >= 1 && q->slot_size == sizeof(MsgSlot) + round16(q->max_msg) &&
-           q->slots_off == sizeof(QueueHeader) && q->waiters_off == q->slots_off + q->max_count * q->slot_size &&
-           q->total_size == queue_size(q->max_msg, q->max_count, q->max_waiters) && q->total_size != 0 &&
-           q->total_size <= payload_size;
-}
-
-bool rebuild_locked(QueueHeader* q) {
-    if (!geometry_ok(q, q->total_size)) {
-        q->broken.store(1, R);
-        return false;
-    }
+bool rebuild_locked(QueueHeader* q, const Geo& g) {
     // 1. Validate every slot and thread the queued ones onto unsorted
     //    per-level lists, the free ones onto the free list.
     std::uint32_t heads[kLevels], free_head = kNil, count = 0, bytes = 0, mask = 0;
     for (std::uint32_t l = 0; l < kLevels; ++l) heads[l] = kNil;
-    for (std::uint32_t i = q->max_count; i-- > 0;) {
-        MsgSlot* s = slot_at(q, i);
+    for (std::uint32_t i = g.max_count; i-- > 0;) {
+        MsgSlot* s = slot_at(q, g, i);
         const std::uint32_t st = s->state.load(R);
         if (st == kSlotFree) {
             s->next.store(free_head, R);
@@ -138,11 +127,11 @@ bool rebuild_locked(QueueHeader* q) {
             continue;
         }
         const std::uint32_t len = s->len.load(R), prio = s->prio.load(R);
-        if (st != kSlotQueued || len > q->max_msg || prio > CHM_MSGQ_PRIO_MAX) {
+        if (st != kSlotQueued || len > g.max_msg || prio > CHM_MSGQ_PRIO_MAX) {
             q->broken.store(1, R);
             return false;
         }
-        const std::uint32_t l = level_of(q, prio);
+        const std::uint32_t l = level_of(g, prio);
         s->next.store(heads[l], R);
         heads[l] = i;
         mask |= 1u << l;
@@ -150,7 +139,7 @@ bool rebuild_locked(QueueHeader* q) {
         bytes += len;
     }
     // 2. Order each level by age.
-    const Age age{q->next_seq.load(R), q->order == kLifo};
+    const Age age{g, q->next_seq.load(R), g.order == kLifo};
     for (std::uint32_t l = 0; l < kLevels; ++l) {
         std::uint32_t tail;
         q->head[l].store(sort_list(q, heads[l], age, &tail), R);
@@ -163,8 +152,8 @@ bool rebuild_locked(QueueHeader* q) {
     // 3. Waiter records: a state other than the three is a record torn
     //    mid-write by its owner's death: free it. Recount the rest.
     std::uint32_t nrecv = 0, nsend = 0;
-    for (std::uint32_t i = 0; i < q->max_waiters; ++i) {
-        Waiter* w = waiter_at(q, i);
+    for (std::uint32_t i = 0; i < g.max_waiters; ++i) {
+        Waiter* w = waiter_at(q, g, i);
         const std::uint32_t st = w->state.load(R);
         if (st == kWaiterRecv) ++nrecv;
         else if (st == kWaiterSend) ++nsend;
@@ -180,8 +169,10 @@ bool rebuild_locked(QueueHeader* q) {
 void recover(const bp::View& v, std::uint32_t entry_index, std::uint32_t dead_slot, std::uint32_t dead_gen,
              std::uint32_t recovery_token) {
     bp::RegistryEntry* e = v.entry(entry_index);
-    const std::uint32_t off = e->offset.load(R), size = e->size.load(R);
-    if (off == 0 || !v.contains(off, size) || size < sizeof(QueueHeader)) return;
+    std::uint32_t off, size;
+    char why[200];
+    // An entry whose payload is not a block of its arena is not followed.
+    if (bp::entry_payload(v, entry_index, sizeof(QueueHeader), &off, &size, why, sizeof why) != 0) return;
     auto* q = v.at<QueueHeader>(off);
     const std::uint32_t dead = bp::make_token(dead_slot, dead_gen);
     if (q->magic.load(std::memory_order_acquire) != kMagic) {
@@ -190,15 +181,18 @@ void recover(const bp::View& v, std::uint32_t entry_index, std::uint32_t dead_sl
         if (e->owner.load(R) == dead) bp::registry_destroy_locked(v, entry_index, recovery_token);
         return;
     }
+    Geo g;
+    if (read_geometry(q, size, &g, why, sizeof why) != 0) return;  // corrupt: its open says so; nothing to follow
     const int r = bp::lock_acquire_recovery(v, &q->lock, recovery_token);
     if (r == -ETIMEDOUT) return;  // a live holder: the next granter drops the dead waiters
-    if (!geometry_ok(q, size)) q->broken.store(1, R);
-    if (r == -EOWNERDEAD && q->lock.dirty.load(std::memory_order_acquire) && !q->broken.load(R)) rebuild_locked(q);
+    if (r == -EOWNERDEAD && q->lock.dirty.load(std::memory_order_acquire) && !q->broken.load(R)) rebuild_locked(q, g);
     bp::lock_clear_dirty(&q->lock);
     WakeBuf<CHM_MSGQ_WAITERS_MAX> wakes;
-    if (!q->broken.load(R)) {
+    // Granting walks the waiter records only, but only a queue whose
+    // indices hold is touched at all.
+    if (!q->broken.load(R) && validate_locked(q, g, why, sizeof why) == 0) {
         bp::lock_mark_dirty(&q->lock);
-        purge_token_locked(v, q, dead, &wakes);
+        purge_token_locked(v, q, g, dead, &wakes);
         bp::lock_clear_dirty(&q->lock);
     }
     bp::lock_release(&q->lock);
@@ -223,23 +217,25 @@ void check_queue(const bp::View& v, const QueueHeader* cq, std::uint32_t payload
                  bp::Report& rep) {
     auto* q = const_cast<QueueHeader*>(cq);  // read only: slot_at wants a mutable header
     if (q->magic.load(R) != kMagic) return rep.problem("%s: no queue magic (creator died while creating?)", name);
-    if (!geometry_ok(q, payload_size)) return rep.problem("%s: header geometry inconsistent", name);
+    Geo g;
+    char why[200];
+    if (read_geometry(q, payload_size, &g, why, sizeof why) != 0) return rep.problem("%s: %s", name, why);
     if (q->broken.load(R)) return rep.problem("%s: marked broken", name);
     char what[160];
     std::snprintf(what, sizeof what, "%s.lock", name);
     bp::check_lock(v, q->lock, what, rep);
     // Every list: in range, QUEUED, on its level, in order, tail right.
-    const Age age{q->next_seq.load(R), q->order == kLifo};
+    const Age age{g, q->next_seq.load(R), g.order == kLifo};
     std::uint32_t seen = 0, bytes = 0, mask = 0;
     for (std::uint32_t l = 0; l < kLevels; ++l) {
         std::uint32_t i = q->head[l].load(R), last = kNil, steps = 0;
         if (i != kNil) mask |= 1u << l;
-        for (; i != kNil; i = slot_at(q, i)->next.load(R)) {
-            if (i >= q->max_count || ++steps > q->max_count)
+        for (; i != kNil; i = slot_at(q, g, i)->next.load(R)) {
+            if (i >= g.max_count || ++steps > g.max_count)
                 return rep.problem("%s: list %u runs out of range or loops", name, l);
-            MsgSlot* s = slot_at(q, i);
+            MsgSlot* s = slot_at(q, g, i);
             if (s->state.load(R) != kSlotQueued) rep.problem("%s: list %u holds slot %u not QUEUED", name, l, i);
-            if (level_of(q, s->prio.load(R)) != l) rep.problem("%s: slot %u on level %u, priority %u", name, i, l, s->prio.load(R));
+            if (level_of(g, s->prio.load(R)) != l) rep.problem("%s: slot %u on level %u, priority %u", name, i, l, s->prio.load(R));
             if (last != kNil && age.before(q, i, last)) rep.problem("%s: list %u out of order at slot %u", name, l, i);
             bytes += s->len.load(R);
             last = i;
@@ -248,8 +244,8 @@ void check_queue(const bp::View& v, const QueueHeader* cq, std::uint32_t payload
         seen += steps;
     }
     std::uint32_t queued = 0, free_slots = 0;
-    for (std::uint32_t i = 0; i < q->max_count; ++i) {
-        const std::uint32_t st = slot_at(q, i)->state.load(R);
+    for (std::uint32_t i = 0; i < g.max_count; ++i) {
+        const std::uint32_t st = slot_at(q, g, i)->state.load(R);
         if (st == kSlotQueued) ++queued;
         else if (st == kSlotFree) ++free_slots;
         else rep.problem("%s: slot %u has state %08x", name, i, st);
@@ -259,14 +255,14 @@ void check_queue(const bp::View& v, const QueueHeader* cq, std::uint32_t payload
     if (q->bytes.load(R) != bytes) rep.problem("%s: bytes %u, %u queued", name, q->bytes.load(R), bytes);
     if (q->level_mask.load(R) != mask) rep.problem("%s: level mask %08x, lists say %08x", name, q->level_mask.load(R), mask);
     std::uint32_t nfree = 0;
-    for (std::uint32_t i = q->free_head.load(R); i != kNil; i = slot_at(q, i)->next.load(R)) {
-        if (i >= q->max_count || ++nfree > q->max_count) return rep.problem("%s: free list out of range or loops", name);
-        if (slot_at(q, i)->state.load(R) != kSlotFree) rep.problem("%s: free list holds slot %u not FREE", name, i);
+    for (std::uint32_t i = q->free_head.load(R); i != kNil; i = slot_at(q, g, i)->next.load(R)) {
+        if (i >= g.max_count || ++nfree > g.max_count) return rep.problem("%s: free list out of range or loops", name);
+        if (slot_at(q, g, i)->state.load(R) != kSlotFree) rep.problem("%s: free list holds slot %u not FREE", name, i);
     }
     if (nfree != free_slots) rep.problem("%s: %u slots FREE, %u on the free list", name, free_slots, nfree);
     std::uint32_t nrecv = 0, nsend = 0;
-    for (std::uint32_t i = 0; i < q->max_waiters; ++i) {
-        Waiter* w = waiter_at(q, i);
+    for (std::uint32_t i = 0; i < g.max_waiters; ++i) {
+        Waiter* w = waiter_at(q, g, i);
         const std::uint32_t st = w->state.load(R);
         if (st == kWaiterFree) continue;
         if (st == kWaiterRecv) ++nrecv;

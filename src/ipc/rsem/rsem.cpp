@@ -4,11 +4,13 @@
 // the grant under the lock and wakes it after. Recovery removes a dead
 // slot's records and passes on a grant it never took.
 #include <cerrno>
+#include <cstdarg>
 #include <climits>
 #include <cstddef>
 #include <cstdint>
 #include <cstdio>
 
+#include "chimera/bp.h"
 #include "chimera/rsem.h"
 #include "chimera/shm.h"
 #include "chimera/task.h"
@@ -74,6 +76,37 @@ Rsem* from_handle(chm_rsem_t* h) {
     if (p < a->base || p + kAllocSize > a->base + a->size) return nullptr;
     Rsem* s = rsem_at(h);
     return s->magic.load(std::memory_order_relaxed) == kRsemMagic ? s : nullptr;
+}
+
+int corrupt(char* why, std::size_t n, const char* fmt, ...) __attribute__((format(printf, 3, 4)));
+int corrupt(char* why, std::size_t n, const char* fmt, ...) {
+    va_list ap;
+    va_start(ap, fmt);
+    std::vsnprintf(why, n, fmt, ap);
+    va_end(ap);
+    return kCorrupt;
+}
+
+// A semaphore's words that open checks: its kind, a binary count of at
+// most 1, every record's state and nwaiting against the records (V's
+// scan stops after nwaiting waiting records, so it must not exceed them).
+// The records themselves are a fixed array: nothing else indexes it.
+int validate_sem(const Rsem* s, char* why, std::size_t n) {
+    constexpr auto R = std::memory_order_relaxed;
+    const std::uint32_t kind = s->kind.load(R);
+    if (kind != CHM_SEM_BINARY && kind != CHM_SEM_COUNTING)
+        return corrupt(why, n, "kind is %u, not binary or counting", kind);
+    if (kind == CHM_SEM_BINARY && s->count.load(R) > 1) return corrupt(why, n, "count is %u in a binary semaphore", s->count.load(R));
+    std::uint32_t waiting = 0;
+    for (std::uint32_t i = 0; i < CHM_RSEM_WAITERS; ++i) {
+        const std::uint32_t st = s->w[i].state.load(R);
+        if (st > kGranted) return corrupt(why, n, "waiter %u: state %u is not FREE, WAITING or GRANTED", i, st);
+        waiting += st == kWaiting;
+    }
+    // Only a quiescent semaphore's count is exact; a held one may be mid-change.
+    if (s->lock.token.load(R) == 0 && s->nwaiting.load(R) != waiting)
+        return corrupt(why, n, "nwaiting is %u, %u records wait", s->nwaiting.load(R), waiting);
+    return 0;
 }
 
 // Count the waiting records again: the repair after a holder died between
@@ -165,8 +198,13 @@ int give_locked(Rsem* s, Waiter** woken) {
 // recovers remote semaphores whether or not it uses them.
 void rsem_recover(const View& v, std::uint32_t index, std::uint32_t dead_slot, std::uint32_t dead_gen,
              std::uint32_t rt) {
-    Rsem* s = rsem_at(v.at<char>(v.entry(index)->offset.load()));
-    if (s->magic.load() != kRsemMagic) return;
+    // The entry's offset is followed only once it is a block of its arena
+    // big enough for a semaphore, and the semaphore only when it is sound.
+    std::uint32_t off, size;
+    char why[200];
+    if (entry_payload(v, index, kAllocSize, &off, &size, why, sizeof why) != 0) return;
+    Rsem* s = rsem_at(v.at<char>(off));
+    if (s->magic.load() != kRsemMagic || validate_sem(s, why, sizeof why) != 0) return;
     if (lock_acquire_recovery(v, &s->lock, rt) == -ETIMEDOUT) return;
     if (s->lock.dirty.load()) repair_locked(s);
     std::uint32_t passed = 0;
@@ -189,6 +227,22 @@ void rsem_recover(const View& v, std::uint32_t index, std::uint32_t dead_slot, s
     for (std::uint32_t i = 0; i < n; ++i)
         wake_granted(grant_of(s, to_wake[i]), owner_slot(to_wake[i]),
                      recorded(to_wake[i]));
+}
+
+int rsem_validate(const View& v, std::uint32_t off, std::uint32_t size, const char* name, char* why, std::size_t n) {
+    char what[160];
+    int r = 0;
+    if (size < kAllocSize) {
+        std::snprintf(what, sizeof what, "size %u, smaller than a remote semaphore (%u)", size, kAllocSize);
+        r = kCorrupt;
+    } else if (const Rsem* s = rsem_at(v.at<char>(off)); s->magic.load(std::memory_order_relaxed) != kRsemMagic) {
+        std::snprintf(what, sizeof what, "magic is 0x%08x, expected 0x%08x", s->magic.load(std::memory_order_relaxed), kRsemMagic);
+        r = kCorrupt;
+    } else {
+        r = validate_sem(s, what, sizeof what);
+    }
+    if (r) std::snprintf(why, n, "%s: %s", name, what);
+    return r;
 }
 
 void rsem_check(const View& v, std::uint32_t off, std::uint32_t size, const char* name, Report& r) {
@@ -271,6 +325,12 @@ static int rsem_create_impl(const char* name, enum chm_sem_kind kind, uint32_t i
     case -ENAMETOOLONG: set_error("chm_rsem_create: name longer than %u", kNameMax); break;
     case -ENOMEM: set_error("chm_rsem_create %s: no room in that memory", name); break;
     case -ENOSPC: set_error("chm_rsem_create %s: the registry is full", name); break;
+    case -EBADMSG: {  // a corrupt arena: its check said which field
+        char why[400];
+        std::snprintf(why, sizeof why, "%s", chm_bp_last_error());
+        set_error("chm_rsem_create %s: %s", name, why);
+        break;
+    }
     default: set_error("chm_rsem_create %s: error %d", name, r); break;
     }
     return r;
@@ -283,13 +343,26 @@ static int rsem_open_impl(const char* name, chm_rsem_t** out) {
     int r = registry_lock(*a, a->token);
     if (r) return r;
     const int i = registry_find_locked(*a, name, kKindRemoteSem);
+    std::uint32_t off = 0, size = 0;
+    char why[200];
     if (i >= 0) {
-        registry_ref_locked(*a, std::uint32_t(i));
-        *out = reinterpret_cast<chm_rsem_t*>(a->base + a->entry(std::uint32_t(i))->offset.load());
+        r = entry_payload(*a, std::uint32_t(i), kAllocSize, &off, &size, why, sizeof why);
+        if (r == 0) {
+            const Rsem* s = rsem_at(a->at<char>(off));
+            if (s->magic.load() != kRsemMagic)
+                r = corrupt(why, sizeof why, "magic is 0x%08x, expected 0x%08x", s->magic.load(), kRsemMagic);
+            else
+                r = validate_sem(s, why, sizeof why);
+        }
+        if (r == 0) {
+            registry_ref_locked(*a, std::uint32_t(i));
+            *out = reinterpret_cast<chm_rsem_t*>(a->base + off);
+        }
     }
     registry_unlock(*a);
     if (i < 0) return set_error("chm_rsem_open: no remote semaphore \"%s\"", name), -ENOENT;
-    return 0;
+    if (r) set_error("chm_rsem_open: remote semaphore \"%s\" (registry[%d]): %s", name, i, why);
+    return r;
 }
 
 static int rsem_p_timed_impl(chm_rsem_t* h, int64_t timeout_ns) {

@@ -5,6 +5,7 @@
 // process; the data path is the caller's own loads and stores.
 #include <cerrno>
 #include <cstdint>
+#include <cstdio>
 
 #include "chimera/bp.h"
 #include "chimera/shm.h"
@@ -54,8 +55,14 @@ static int shm_create_impl(const char* name, size_t size, int where, void** out)
     case -EEXIST: set_error("chm_shm_create: the name \"%s\" is taken", name); break;
     case -ENAMETOOLONG: set_error("chm_shm_create: name longer than %u", kNameMax); break;
     case -ENOMEM: set_error("chm_shm_create %s: no %zu free bytes in %s", name, size, where == CHM_SHM_COMMON ? "common memory" : "that RTPU's window"); break;
-    case -ENOSPC: set_error("chm_shm_create %s: the registry is full (%u entries)", name, a->hdr()->geo.registry_capacity); break;
+    case -ENOSPC: set_error("chm_shm_create %s: the registry is full (%u entries)", name, a->geo().registry_capacity); break;
     case -ENOTRECOVERABLE: set_error("chm_shm_create %s: that memory was damaged by a process that died in it", name); break;
+    case -EBADMSG: {  // a corrupt arena: its check said which field
+        char why[400];
+        std::snprintf(why, sizeof why, "%s", chm_bp_last_error());
+        set_error("chm_shm_create %s: %s", name, why);
+        break;
+    }
     default: set_error("chm_shm_create %s: error %d", name, r); break;
     }
     return r;
@@ -68,15 +75,22 @@ static int shm_attach_impl(const char* name, void** out, size_t* size) {
     int r = lock_registry(a);
     if (r) return r;
     const int i = registry_find_locked(*a, name, kKindShm);
+    char why[200];
     if (i >= 0) {
-        RegistryEntry* e = a->entry(std::uint32_t(i));
-        registry_ref_locked(*a, std::uint32_t(i));
-        *out = a->base + e->offset.load(std::memory_order_relaxed);
-        if (size) *size = e->size.load(std::memory_order_relaxed);
+        // The segment is handed out as plain memory: its offset and size
+        // must describe an allocated block of its arena (no 32-bit wrap).
+        std::uint32_t off, bytes;
+        r = entry_payload(*a, std::uint32_t(i), 1, &off, &bytes, why, sizeof why);
+        if (r == 0) {
+            registry_ref_locked(*a, std::uint32_t(i));
+            *out = a->base + off;
+            if (size) *size = bytes;
+        }
     }
     registry_unlock(*a);
     if (i < 0) return set_error("chm_shm_attach: no shared memory segment \"%s\"", name), -ENOENT;
-    return 0;
+    if (r) set_error("chm_shm_attach: segment \"%s\": %s", name, why);
+    return r;
 }
 
 static int shm_detach_impl(void* addr) {

@@ -43,11 +43,11 @@ const char* state_name(bp::SlotState s) {
 
 // Under the ring lock: a FREE record, claimed for `token` (state WRITING,
 // owner and stamp set before the state leaves FREE). nullptr: ring full.
-Record* claim_locked(bp::RingHeader* ring, std::uint32_t token, std::uint32_t* seq_out) {
-    const std::uint32_t cap = ring->capacity;
+Record* claim_locked(const bp::View& v, bp::RingHeader* ring, std::uint32_t token, std::uint32_t* seq_out) {
+    const std::uint32_t cap = ring_capacity(v);
     const std::uint32_t start = ring->head.load(R) % cap;
     for (std::uint32_t k = 0; k < cap; ++k) {
-        Record* r = record_at(ring, (start + k) % cap);
+        Record* r = record_at(v, ring, (start + k) % cap);
         if (phase_of(r->state.load(Acq)) != kFree) continue;
         std::uint32_t seq = (ring->head.fetch_add(1, R) + 1) & 0x0FFFFFFF;
         if (seq == 0) seq = 1;
@@ -110,8 +110,8 @@ namespace chm::xmail {
 unsigned reclaim(const bp::View& v, bp::RingHeader* ring) {
     unsigned freed = 0;
     const std::uint32_t now = bp::mono_ms();
-    for (std::uint32_t i = 0; i < ring->capacity; ++i) {
-        Record* r = record_at(ring, i);
+    for (std::uint32_t i = 0; i < ring_capacity(v); ++i) {
+        Record* r = record_at(v, ring, i);
         std::uint32_t st = r->state.load(Acq);
         const Phase p = phase_of(st);
         if (p != kWriting && p != kPosted && p != kReplied) continue;
@@ -128,9 +128,9 @@ unsigned withdraw(const bp::View& v, std::uint32_t token) {
     unsigned n = 0;
     for (std::uint32_t s = 0; s < v.slots(); ++s) {
         bp::RingHeader* ring = v.ring(s);
-        if (ring->record_size < sizeof(Record)) continue;  // no express mail on this backplane
-        for (std::uint32_t i = 0; i < ring->capacity; ++i) {
-            Record* r = record_at(ring, i);
+        if (ring_record_size(v) < sizeof(Record)) continue;  // no express mail on this backplane
+        for (std::uint32_t i = 0; i < ring_capacity(v); ++i) {
+            Record* r = record_at(v, ring, i);
             const std::uint32_t st = r->state.load(Acq);
             const Phase p = phase_of(st);
             if (p == kFree || p == kAbandoned || r->owner.load(R) != token) continue;
@@ -170,11 +170,12 @@ int call(int rtpu, Kind kind, const void* req, std::uint32_t len, void* reply, s
         return -EHOSTDOWN;
     }
     bp::RingHeader* ring = a->ring(std::uint32_t(rtpu));
-    if (ring->record_size < kRecordMin)
-        return set_error("ring records of %u bytes are below %u", ring->record_size, kRecordMin), -EMSGSIZE;
-    if (len > ring->record_size - sizeof(Record))
+    const std::uint32_t rsize = ring_record_size(*a);
+    if (rsize < kRecordMin)
+        return set_error("ring records of %u bytes are below %u", rsize, kRecordMin), -EMSGSIZE;
+    if (len > rsize - sizeof(Record))
         return set_error("request of %u bytes exceeds a ring record's %zu", len,
-                         std::size_t(ring->record_size - sizeof(Record))), -EMSGSIZE;
+                         std::size_t(rsize - sizeof(Record))), -EMSGSIZE;
 
     const std::uint64_t start = now_ns();
     const std::uint64_t deadline = start + timeout_ns;
@@ -190,11 +191,11 @@ int call(int rtpu, Kind kind, const void* req, std::uint32_t len, void* reply, s
         // -EOWNERDEAD: a sender died claiming; every claim step leaves a
         // consistent record, so there is nothing to repair.
         bp::lock_clear_dirty(&ring->lock);
-        r = claim_locked(ring, a->token, &seq);
+        r = claim_locked(*a, ring, a->token, &seq);
         if (!r && !reclaimed) {
             reclaim(*a, ring);
             reclaimed = true;
-            r = claim_locked(ring, a->token, &seq);
+            r = claim_locked(*a, ring, a->token, &seq);
         }
         bp::lock_release(&ring->lock);
         if (r) break;

@@ -65,26 +65,10 @@ int do_ping(char* rep, std::uint32_t* n) {
 }
 
 int do_spawn(const char* req, std::uint32_t len, char* rep, std::uint32_t* n, std::uint32_t from) {
-    SpawnRequest h;
-    if (len < sizeof h) return -EINVAL;
-    std::memcpy(&h, req, sizeof h);
-    if (h.argc < 0 || h.text_len > len - sizeof h || h.text_len == 0) return -EINVAL;
-    const char* text = req + sizeof h;
-    if (text[h.text_len - 1] != 0) return -EINVAL;
-    // path, then argc strings, all inside the text.
-    const char* argv[64];
-    if (h.argc > 64) return -E2BIG;
-    const char* p = text;
-    const char* end = text + h.text_len;
-    const char* path = p;
-    p += std::strlen(p) + 1;
-    for (int i = 0; i < h.argc; ++i) {
-        if (p >= end) return -EINVAL;
-        argv[i] = p;
-        p += std::strlen(p) + 1;
-    }
+    SpawnArgs args;
+    if (int e = decode_spawn(req, len, &args)) return e;
     chm_tid_t tid = CHM_TID_NONE;
-    const int prog = chm_program_load(path, h.argc, argv, nullptr, &tid);
+    const int prog = chm_program_load(args.path, args.argc, args.argv, nullptr, &tid);
     SpawnReply out{tid, prog};
     std::memcpy(rep, &out, sizeof out);
     *n = sizeof out;
@@ -232,8 +216,8 @@ void serve_all() {
     bp::RingHeader* ring = g_s.ring;
     reclaim(*a, ring);
     std::uint32_t k = 0;
-    for (std::uint32_t i = 0; i < ring->capacity; ++i) {
-        const std::uint32_t st = record_at(ring, i)->state.load(Acq);
+    for (std::uint32_t i = 0; i < ring_capacity(*a); ++i) {
+        const std::uint32_t st = record_at(*a, ring, i)->state.load(Acq);
         if (phase_of(st) == kPosted) g_s.posted[k++] = {seq_of(st), i};
     }
     // Wrap-safe order of 28-bit sequence numbers.
@@ -241,7 +225,7 @@ void serve_all() {
         return std::int32_t((x.seq - y.seq) << 4) < 0;
     });
     for (std::uint32_t j = 0; j < k; ++j) {
-        serve(record_at(ring, g_s.posted[j].index), g_s.posted[j].seq);
+        serve(record_at(*a, ring, g_s.posted[j].index), g_s.posted[j].seq);
         if (g_s.stop_after) {
             g_s.stop_after = false;
             chm_kernel_stop(g_s.stop_code);  // does not return
@@ -260,20 +244,42 @@ void server_main(void*) {
 
 }  // namespace
 
+int decode_spawn(const char* req, std::uint32_t len, SpawnArgs* out) {
+    SpawnRequest h;
+    if (len < sizeof h) return -EINVAL;
+    std::memcpy(&h, req, sizeof h);
+    if (h.argc < 0 || h.text_len > len - sizeof h || h.text_len == 0) return -EINVAL;
+    const char* text = req + sizeof h;
+    if (text[h.text_len - 1] != 0) return -EINVAL;  // so every strlen below stops inside
+    if (h.argc > kSpawnArgsMax) return -E2BIG;
+    // path, then argc strings, all inside the text.
+    const char* p = text;
+    const char* end = text + h.text_len;
+    out->path = p;
+    p += std::strlen(p) + 1;
+    for (int i = 0; i < h.argc; ++i) {
+        if (p >= end) return -EINVAL;
+        out->argv[i] = p;
+        p += std::strlen(p) + 1;
+    }
+    out->argc = h.argc;
+    return 0;
+}
+
 int server_start(int priority) {
     bp::Attachment* a = bp::current();
     if (!a || a->kind != bp::SlotKind::Rtpu) return -ENOTCONN;
     if (g_s.started) return -EBUSY;
     bp::RingHeader* ring = a->ring(a->slot);
-    if (ring->record_size < kRecordMin) return -EMSGSIZE;
+    if (ring_record_size(*a) < kRecordMin) return -EMSGSIZE;
     chm_free(g_s.req);  // a previous start's (a kernel started again)
     chm_free(g_s.rep);
     chm_free(g_s.posted);
     g_s = Server{};
-    g_s.room = ring->record_size - sizeof(Record);
+    g_s.room = ring_record_size(*a) - sizeof(Record);
     g_s.req = static_cast<char*>(chm_malloc(g_s.room));
     g_s.rep = static_cast<char*>(chm_malloc(g_s.room));
-    g_s.posted = static_cast<Server::Posted*>(chm_malloc(sizeof(Server::Posted) * ring->capacity));
+    g_s.posted = static_cast<Server::Posted*>(chm_malloc(sizeof(Server::Posted) * ring_capacity(*a)));
     auto undo = [] {
         chm_free(g_s.req);
         chm_free(g_s.rep);
@@ -288,8 +294,8 @@ int server_start(int priority) {
     // What a dead predecessor of this slot left: requests it took and
     // never answered, and requests abandoned to it. Posted requests of
     // live senders stay and are served.
-    for (std::uint32_t i = 0; i < ring->capacity; ++i) {
-        Record* r = record_at(ring, i);
+    for (std::uint32_t i = 0; i < ring_capacity(*a); ++i) {
+        Record* r = record_at(*a, ring, i);
         std::uint32_t st = r->state.load(Acq);
         const Phase p = phase_of(st);
         if (p == kServing || p == kAbandoned)

@@ -140,16 +140,36 @@ unsigned reclaim(const bp::View& v, bp::RingHeader* ring);
 // server next wakes. Returns the number of records given up.
 unsigned withdraw(const bp::View& v, std::uint32_t token);
 
-// A record of a ring (index < capacity).
-inline Record* record_at(bp::RingHeader* ring, std::uint32_t i) {
+// A record of a ring (index < capacity). Capacity and record size come
+// from the process's validated layout (View::geo), never from the ring
+// header in shared memory: attach checked that the two agree, and a header
+// changed later cannot move a record outside the ring (a capacity or a
+// record size of 0 once divided by zero and read outside the map).
+inline std::uint32_t ring_capacity(const bp::View& v) { return v.geo().ring_records; }
+inline std::uint32_t ring_record_size(const bp::View& v) { return v.geo().ring_record_size; }
+inline Record* record_at(const bp::View& v, bp::RingHeader* ring, std::uint32_t i) {
     return reinterpret_cast<Record*>(reinterpret_cast<char*>(ring + 1) +
-                                     std::size_t(i) * ring->record_size);
+                                     std::size_t(i) * ring_record_size(v));
 }
 inline char* payload_of(Record* r) { return reinterpret_cast<char*>(r + 1); }
 
 void set_error(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
 
 // ------------------------------------------------------------ server side
+
+// A spawn request as the server reads it: pointers into the request.
+inline constexpr int kSpawnArgsMax = 64;
+struct SpawnArgs {
+    const char* path;
+    int argc;
+    const char* argv[kSpawnArgsMax];
+};
+// Decode a kSpawn request of `len` bytes (a copy the server owns: it may
+// hold anything a sender wrote). 0; -EINVAL shorter than its header, a
+// text length beyond the request or 0, a text not NUL-terminated, fewer
+// strings than argc says; -E2BIG more than kSpawnArgsMax arguments.
+int decode_spawn(const char* req, std::uint32_t len, SpawnArgs* out);
+
 
 // On the kernel thread of an RTPU that joined the backplane and bound its
 // kernel (ipc::wake_bind_kernel), before chm_kernel_run: free what a dead
