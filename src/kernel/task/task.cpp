@@ -160,8 +160,10 @@ void task_end_locked(Tcb* t) {
     t->state = TaskState::Ended;
     --g_k.alive;
     while (Tcb* j = t->joiners.head) wake_locked(j, 0);
-    std::free(t->ext);  // its hooks and local values were run already
-    t->ext = nullptr;
+    if (t->ext) {  // its hooks and local values were run already
+        std::free(t->ext);
+        t->ext = nullptr;
+    }
 }
 
 void task_free_stack(Tcb* t) {
@@ -269,13 +271,14 @@ int chm_task_destroy(chm_tid_t id) {
             t->state = TaskState::Suspended;
         }
     }
-    task_run_end_hooks(t);
+    if (t->ext) task_run_end_hooks(t);  // (only this task's own calls create it)
     IrqGuard guard;
     if (tid_of(t) == id && t->state != TaskState::Ended) {  // nobody ended it meanwhile
         t->end_reason = CHM_TASK_DESTROYED;
+        const bool joined = t->joiners.head != nullptr;
         task_end_locked(t);
         task_free_stack(t);
-        reschedule_locked();  // its joiner may be more urgent than we are
+        if (joined) reschedule_locked();  // its joiner may be more urgent than we are
     }
     return 0;
 }
