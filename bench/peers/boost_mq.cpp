@@ -1,6 +1,6 @@
 // Peer: Boost.Interprocess message_queue, the C++ shared-memory queue a user
 // would pick instead of Chimera's message queues: 24-byte send+receive in one
-// thread (the target for msgq_putget_24b_xrtpu), send alone and receive alone
+// thread (the target for msgq_putget_24b_remote_one_process), send alone and receive alone
 // (beside the paper's put and get), and a round trip between two processes.
 #include <boost/date_time/posix_time/posix_time_types.hpp>
 #include <boost/interprocess/ipc/message_queue.hpp>
