@@ -76,8 +76,14 @@ constexpr RowInfo kRows[] = {
      "V waking a higher-priority task, including the switch"},
     {"local_pv_noblock", "ns", "peer_sem_wait_post", 14 * us, ratio_le(1),
      "uncontended local P+V (paper: 7 + 7)"},
-    {"task_spawn_destroy", "ns", "peer_pthread_create_join", 319 * us, ratio_le(0.01),
-     "spawn + destroy a task (paper: 220 + 99); target 100x faster than pthreads"},
+    // Like for like: the task is spawned, runs and ends, as the peer's thread
+    // is created, runs and is joined (paper: 220 + 99, create + destroy).
+    {"task_spawn_run_exit", "ns", "peer_pthread_create_join", 319 * us, ratio_le(0.01),
+     "spawn a task that runs at once and ends; target 100x faster than pthread create + join"},
+    {"task_spawn_run_exit_vs_fiber", "ns", "peer_fiber_create_destroy", kNull, none,
+     "task_spawn_run_exit beside a Boost.Context fiber created, run to its end and destroyed"},
+    {"task_spawn_destroy_never_runs", "ns", "peer_pthread_create_join", kNull, none,
+     "spawn + destroy a task that never runs (cheaper than the peer's work: no target)"},
     {"sched_ops_10k_over_10", "x", nullptr, kNull, {Target::kValueAtMost, 2},
      "CPU per job of 10,000 periodic tasks whose releases fire (MUF, EDF) over the same with 10"},
     {"release_lateness_p99_20tasks", "ns", "peer_sigwait_1khz_lateness_p99", kNull, ratio_le(1.2),
