@@ -173,8 +173,8 @@ def spread(r):
     if len(f) < 2:
         return ""
     if (r.get("target") or "").startswith("ratio"):
-        return f"{min(f):.3g}–{max(f):.3g}×"
-    return f"{human(min(f), r['unit'])} – {human(max(f), r['unit'])}"
+        return f"{min(f):.3g}× to {max(f):.3g}×"
+    return f"{human(min(f), r['unit'])} to {human(max(f), r['unit'])}"
 
 
 def summary_markdown(rows, rest):
@@ -417,7 +417,7 @@ def plots(rows, lateness, outdir, exps=None):
                 b = float(t.split()[-1])
                 ax.plot([b, b], [i - 0.4, i + 0.4], color="black", lw=2)
         for i, r in enumerate(rr):
-            ax.annotate(f" {r['ratio']:.2f}x", (r["ratio"], i), va="center", fontsize=8)
+            ax.annotate(f" {r['ratio']:.3g}x", (r["ratio"], i), va="center", fontsize=8)
         ax.axvline(1, color="grey", lw=0.8, ls="--")
         ax.set_xscale("log")
         lo = min(0.5, min(r["ratio"] for r in rr) / 2)
