@@ -103,14 +103,23 @@ constexpr RowInfo kRows[] = {
     // (no second RTPU runs): not a cross-RTPU figure, so no target.
     {"msgq_putget_24b_remote_one_process", "ns", "peer_bipc_mq_24b_one_thread", 160 * us, none,
      "24-byte put+get by one process, queue in another RTPU's window, no wait (paper: 79 + 81)"},
+    // Through RTPU kernels on both ends, the two RTPUs on one core as the
+    // peer's two processes.
     {"msgq_wake_rt2", "ns", "peer_posix_mq_24b_rt2_same_core", kNull, ratio_le(0.8),
-     "cross-RTPU 24-byte message that wakes the receiver, RT/2"},
+     "cross-RTPU 24-byte message that wakes the receiving task (kernels on both ends), RT/2"},
+    {"msgq_wake_rt2_host_processes", "ns", "peer_posix_mq_24b_rt2_same_core", kNull, none,
+     "24-byte message round trip between two host processes (no kernel) sleeping in receive, RT/2"},
     // The same figure beside the least any message that sleeps in receive
     // costs on the host: how much of msgq_wake_rt2 is Chimera's own work.
     {"msgq_wake_rt2_vs_floor", "ns", "peer_futex_handoff_rt2_same_core", kNull, ratio_le(1.1),
      "msgq_wake_rt2's figure beside the bare futex hand-off it is built on"},
+    // Through RTPU kernels on both ends (doorbell, grant, task switch), the
+    // two RTPUs on one core as the peer's two processes.
     {"rsem_handoff_sleeping", "ns", "peer_futex_pingpong_same_core", kNull, ratio_le(1.1),
-     "remote semaphore hand-off to a sleeping RTPU, RT/2"},
+     "remote semaphore hand-off between tasks on two RTPUs (kernels) on one core, each "
+     "sleeping, RT/2"},
+    {"rsem_handoff_sleeping_host_processes", "ns", "peer_futex_pingpong_same_core", kNull, none,
+     "remote semaphore hand-off between two host processes (no kernel) on one core, RT/2"},
     {"rsem_handoff_polling", "ns", "peer_cacheline_pingpong_rtpus", kNull, ratio_le(3),
      "remote semaphore hand-off to a polling RTPU, RT/2"},
     // ---- scaling (issue 6 item 5): the curves are in scaling_rtpus.png and

@@ -7,6 +7,9 @@
 // run ends when the sender has that answer: ns per message = run / n. The
 // peer, peer_bipc_mq_stream_24b_xcore (peers/boost_mq.cpp), does the same
 // between two processes pinned the same way with Boost message_queue.
+//
+// msgq_wake_rt2 (and msgq_wake_rt2_vs_floor): the 24-byte round trip that
+// wakes a receiver sleeping on another RTPU, kernels on both ends.
 #include <cstdint>
 #include <cstring>
 #include <functional>
@@ -84,6 +87,56 @@ void msgq_stream(Session& s) {
     k.run();
 }
 CHM_BENCH_MEASUREMENT(msgq_stream, "msgq_stream_24b_xrtpu");
+
+// msgq_wake_rt2 through kernels on both ends: a task on RTPU 1 sends a
+// 24-byte message to a task on RTPU 2 sleeping in receive (queues of 8 in
+// common memory), which answers on a second queue; both RTPUs on one core,
+// as the peer's two processes. RT/2.
+void msgq_wake_kernels(Session& s) {
+    Session::pin(s.cpu(0));
+    ipcb::BackplaneFile f("wake");
+    ipcb::Joined me(f.path, 1);
+    chm_msgq_t* down = make_queue("down", CHM_MSGQ_COMMON, 8);
+    chm_msgq_t* up = make_queue("up", CHM_MSGQ_COMMON, 8);
+    auto child = ipcb::rtpu_child(s.cpu(0), f.path, 2, 0, ipcb::child_limit(s), [](ipcb::Kernel& k) {
+        static std::function<void()> body;
+        body = [] {
+            chm_msgq_t *d = nullptr, *u = nullptr;
+            check_q(chm_msgq_open("down", &d), "chm_msgq_open down");
+            check_q(chm_msgq_open("up", &u), "chm_msgq_open up");
+            char buf[kMsg];
+            for (;;) {
+                check_q(chm_msgq_receive(d, buf, sizeof buf, nullptr), "chm_msgq_receive");
+                check_q(chm_msgq_send(u, 2, 0, buf, kMsg), "chm_msgq_send");
+            }
+        };
+        k.spawn(&body, 10, "echo");
+    });
+    ipcb::wait_rtpus_running({2});
+    ipcb::Kernel k(1, 0);
+    std::function<void()> body = [&] {
+        const std::string config =
+            "same core (" + s.cpu_name(0) + "): a task on RTPU 1 (this process) and a task on RTPU "
+            "2 (a forked process, its own kernel), FIXED policy, idle_poll_ns 0 (an idle RTPU "
+            "sleeps on its doorbell's futex at once); queues of 8 24-byte slots in common memory, "
+            "blocking chm_msgq_send / chm_msgq_receive; RT/2";
+        const Stats st = s.time_ops(
+            "msgq_wake_rt2", config,
+            [&](std::uint64_t n) {
+                char buf[kMsg];
+                std::memset(buf, 7, sizeof buf);
+                for (std::uint64_t i = 0; i < n; ++i) {
+                    check_q(chm_msgq_send(down, 1, 0, buf, kMsg), "chm_msgq_send");
+                    check_q(chm_msgq_receive(up, buf, sizeof buf, nullptr), "chm_msgq_receive");
+                }
+            },
+            2);
+        s.emit("msgq_wake_rt2_vs_floor", "msgq_wake_rt2's runs: " + config, st.median, st.min, st.max);
+    };
+    k.spawn(&body, 10, "bench");
+    k.run();
+}
+CHM_BENCH_MEASUREMENT(msgq_wake_kernels, "msgq_wake_rt2", "msgq_wake_rt2_vs_floor");
 
 }  // namespace
 }  // namespace chm::bench
