@@ -64,6 +64,7 @@ struct Measured {
     std::string name, config;
     double value = kNull, min = kNull, max = kNull;
     std::string skipped;  // non-empty: no figure, for this reason
+    int round = 0;        // which round of the run produced it (0-based; main.cpp sets it)
 };
 
 // "This row cannot be measured on this machine" (a tool is missing, one CPU

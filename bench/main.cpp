@@ -4,6 +4,13 @@
 //
 //   chimera-bench [--quick] [--filter REGEX] [--json FILE]
 //                 [--unmeasured-json FILE] [--samples DIR] [--cpus A,B] [--list]
+//                 [--rounds N]
+//
+// Robust, not lucky: every row with a target, and its peer, is measured in
+// --rounds interleaved rounds (round 1 is the whole selection; rounds 2..N
+// repeat only the target rows' measurements and their peers', each peer's
+// right after the first row that needs it), and a target is met only when
+// it held in every round. The row's figure is the median of its rounds'.
 #include <sched.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -31,19 +38,23 @@ struct Cli {
     Options opt;
     std::string json, unmeasured_json, filter;
     bool list = false;
+    int rounds = 3;  // rounds of every target row and its peer
 };
 
 [[noreturn]] void usage(int code) {
     std::fprintf(code ? stderr : stdout,
                  "usage: chimera-bench [--quick] [--filter REGEX] [--json FILE]\n"
                  "                     [--unmeasured-json FILE] [--samples DIR] [--cpus A,B] [--list]\n"
+                 "                     [--rounds N]\n"
                  "  --quick            few short runs (whole suite well under a minute)\n"
                  "  --filter REGEX     only measurements producing a matching row (and their peers)\n"
                  "  --json FILE        write the measured rows as a JSON array\n"
                  "  --unmeasured-json FILE  catalog rows without a figure, with the reason\n"
                  "  --samples DIR      raw samples of distribution rows, one file per row\n"
                  "  --cpus A,B         the two CPUs to use (default: the first two allowed)\n"
-                 "  --list             list the catalog and which rows can be measured\n");
+                 "  --list             list the catalog and which rows can be measured\n"
+                 "  --rounds N         measure every target row and its peer in N interleaved\n"
+                 "                     rounds (default 3); a target is met only in every round\n");
     std::exit(code);
 }
 
@@ -71,6 +82,10 @@ Cli parse(int argc, char** argv) {
         else if (a == "--filter") cli.filter = value();
         else if (a == "--samples") cli.opt.samples_dir = value();
         else if (a == "--list") cli.list = true;
+        else if (a == "--rounds") {
+            cli.rounds = std::atoi(value().c_str());
+            if (cli.rounds < 1) usage(2);
+        }
         else if (a == "--cpus") {
             std::vector<int> cpus;
             const std::string v = value();
@@ -157,83 +172,183 @@ int run(const Cli& cli) {
     sched_getaffinity(0, sizeof home, &home);
     watchdog_init();
 
+    // The target group: measurements producing a selected row with a
+    // target, and those producing such rows' peers. They run in every round.
+    std::set<const Measurement*> targeted;
+    for (const RowInfo& r : catalog()) {
+        if (r.target.kind == Target::kNone || !wanted(r.name) || !producer.count(r.name)) continue;
+        targeted.insert(producer[r.name]);
+        if (r.peer && producer.count(r.peer)) targeted.insert(producer[r.peer]);
+    }
+    // A round's order: catalog order, each measurement followed at once by
+    // those producing its rows' peers, so a row and its peer are measured
+    // close together in every round.
+    auto order = [&](const std::set<const Measurement*>& set) {
+        std::vector<const Measurement*> seq;
+        std::set<const Measurement*> done;
+        for (const Measurement* m : all) {
+            if (!set.count(m) || done.count(m)) continue;
+            seq.push_back(m);
+            done.insert(m);
+            for (const std::string& r : m->rows) {
+                const RowInfo* info = find_row(r);
+                if (!info || !info->peer || !producer.count(info->peer)) continue;
+                const Measurement* p = producer[info->peer];
+                if (set.count(p) && !done.count(p)) {
+                    seq.push_back(p);
+                    done.insert(p);
+                }
+            }
+        }
+        return seq;
+    };
+    std::vector<std::vector<const Measurement*>> plan{order(selected)};
+    for (int r = 1; r < cli.rounds && !targeted.empty(); ++r) plan.push_back(order(targeted));
+    int total = 0;
+    for (const auto& round : plan) total += int(round.size());
+
     std::vector<Measured> measured;
     std::map<std::string, std::string> failed;
     int n = 0, failures = 0;
-    const int total = int(selected.size());
     const std::uint64_t t_start = mono_ns();
-    for (const Measurement* m : all) {
-        if (!selected.count(m)) continue;
-        std::fprintf(stderr, "chimera-bench: [%2d/%d] %-28s", ++n, total, m->fn_name);
-        std::fflush(nullptr);  // no buffered output may be duplicated by a fork
-        const std::uint64_t t0 = mono_ns();
-        const std::size_t before = measured.size();
-        Session s(cli.opt, &measured);
-        watchdog_arm(cli.opt.watchdog_s);
-        std::string outcome = "ok";
-        try {
-            m->fn(s);
-        } catch (const Skip& e) {
-            outcome = std::string("skipped: ") + e.what();
-            for (const std::string& r : m->rows) s.skip(r, e.what());
-        } catch (const std::exception& e) {
-            outcome = std::string("FAILED: ") + e.what();
-            ++failures;
-            for (const std::string& r : m->rows) failed[r] = e.what();
-        }
-        watchdog_disarm();
-        sched_setaffinity(0, sizeof home, &home);
-        // A row must come from the measurement that declares it, once.
-        for (std::size_t i = before; i < measured.size(); ++i) {
-            const auto& rows = m->rows;
-            if (std::find(rows.begin(), rows.end(), measured[i].name) == rows.end()) {
-                std::fprintf(stderr, "\nchimera-bench: %s emitted undeclared row %s\n", m->fn_name,
-                             measured[i].name.c_str());
-                return 3;
+    for (std::size_t round = 0; round < plan.size(); ++round) {
+        if (plan.size() > 1)
+            std::fprintf(stderr, "chimera-bench: round %zu of %zu%s\n", round + 1, plan.size(),
+                         round ? " (target rows and their peers)" : "");
+        for (const Measurement* m : plan[round]) {
+            std::fprintf(stderr, "chimera-bench: [%2d/%d] %-28s", ++n, total, m->fn_name);
+            std::fflush(nullptr);  // no buffered output may be duplicated by a fork
+            const std::uint64_t t0 = mono_ns();
+            const std::size_t before = measured.size();
+            Session s(cli.opt, &measured);
+            watchdog_arm(cli.opt.watchdog_s);
+            std::string outcome = "ok";
+            try {
+                m->fn(s);
+            } catch (const Skip& e) {
+                outcome = std::string("skipped: ") + e.what();
+                for (const std::string& r : m->rows) s.skip(r, e.what());
+            } catch (const std::exception& e) {
+                outcome = std::string("FAILED: ") + e.what();
+                ++failures;
+                for (const std::string& r : m->rows)
+                    failed[r] = e.what() + (round ? " (round " + std::to_string(round + 1) + ")"
+                                                  : std::string());
             }
+            watchdog_disarm();
+            sched_setaffinity(0, sizeof home, &home);
+            // A row must come from the measurement that declares it, once.
+            for (std::size_t i = before; i < measured.size(); ++i) {
+                measured[i].round = int(round);
+                const auto& rows = m->rows;
+                if (std::find(rows.begin(), rows.end(), measured[i].name) == rows.end()) {
+                    std::fprintf(stderr, "\nchimera-bench: %s emitted undeclared row %s\n",
+                                 m->fn_name, measured[i].name.c_str());
+                    return 3;
+                }
+            }
+            std::fprintf(stderr, " %6.2f s  %s\n", double(mono_ns() - t0) / 1e9, outcome.c_str());
         }
-        std::fprintf(stderr, " %6.2f s  %s\n", double(mono_ns() - t0) / 1e9, outcome.c_str());
     }
 
-    // Join with the catalog, in catalog order. A row measured twice (skipped
-    // after a partial emit) keeps its first figure.
-    std::map<std::string, const Measured*> by_name;
-    for (const Measured& x : measured) by_name.emplace(x.name, &x);
+    // Join with the catalog, in catalog order. Per row and round the first
+    // figure counts (a row skipped after a partial emit keeps its figure).
+    std::map<std::string, std::map<int, const Measured*>> by_name;
+    std::map<std::string, const Measured*> skipped;
+    for (const Measured& x : measured) {
+        if (!x.skipped.empty()) {
+            skipped.emplace(x.name, &x);
+            continue;
+        }
+        by_name[x.name].emplace(x.round, &x);
+    }
+    auto median = [](std::vector<double> v) {
+        std::sort(v.begin(), v.end());
+        if (v.empty()) return kNull;
+        const std::size_t h = v.size() / 2;
+        return v.size() % 2 ? v[h] : (v[h - 1] + v[h]) / 2;
+    };
+    auto judge = [](const Target& t, double v, double ratio) -> int {
+        switch (t.kind) {
+        case Target::kNone: return -1;
+        case Target::kRatioAtMost: return std::isfinite(ratio) ? ratio <= t.bound : -1;
+        case Target::kValueAtMost: return std::isfinite(v) ? v <= t.bound : -1;
+        case Target::kValueBelow: return std::isfinite(v) ? v < t.bound : -1;
+        case Target::kValueAtLeast: return std::isfinite(v) ? v >= t.bound : -1;
+        }
+        return -1;
+    };
     std::vector<Row> rows;
     std::vector<Unmeasured> rest;
     for (const RowInfo& info : catalog()) {
         auto it = by_name.find(info.name);
-        const bool have = it != by_name.end() && it->second->skipped.empty();
-        if (!have) {
+        if (it == by_name.end()) {
             if (!wanted(info.name)) continue;
             if (failed.count(info.name)) rest.push_back({&info, "failed: " + failed[info.name]});
-            else if (it != by_name.end()) rest.push_back({&info, "skipped: " + it->second->skipped});
+            else if (skipped.count(info.name))
+                rest.push_back({&info, "skipped: " + skipped[info.name]->skipped});
             else if (!producer.count(info.name)) rest.push_back({&info, "not yet measured"});
             continue;
         }
-        Row row{&info, *it->second};
+        const auto& per_round = it->second;
+        Row row{&info, *per_round.begin()->second, kNull, kNull, -1, {}, 1};
+        row.rounds_wanted = targeted.count(producer[info.name]) ? int(plan.size()) : 1;
+        const std::map<int, const Measured*>* peer_rounds = nullptr;
         if (info.peer) {
             auto p = by_name.find(info.peer);
-            if (p != by_name.end() && p->second->skipped.empty()) row.peer_value = p->second->value;
-            if (std::isfinite(row.peer_value) && row.peer_value != 0 && std::isfinite(row.m.value))
-                row.ratio = row.m.value / row.peer_value;
+            if (p != by_name.end()) peer_rounds = &p->second;
         }
-        const Target& t = info.target;
-        const double v = row.m.value;
-        switch (t.kind) {
-        case Target::kNone: break;
-        case Target::kRatioAtMost:
-            if (std::isfinite(row.ratio)) row.target_met = row.ratio <= t.bound;
-            break;
-        case Target::kValueAtMost:
-            if (std::isfinite(v)) row.target_met = v <= t.bound;
-            break;
-        case Target::kValueBelow:
-            if (std::isfinite(v)) row.target_met = v < t.bound;
-            break;
-        case Target::kValueAtLeast:
-            if (std::isfinite(v)) row.target_met = v >= t.bound;
-            break;
+        std::vector<double> values, peer_values;
+        for (const auto& [r, x] : per_round) {
+            RoundFigure f;
+            f.round = r + 1;
+            f.value = x->value;
+            f.config = x->config;
+            values.push_back(x->value);
+            if (peer_rounds) {
+                // The peer's figure of the same round (a peer measured in
+                // round 1 only serves every round of a row without a target).
+                auto q = peer_rounds->find(r);
+                if (q == peer_rounds->end() && row.rounds_wanted == 1) q = peer_rounds->begin();
+                if (q != peer_rounds->end()) f.peer_value = q->second->value;
+            }
+            if (std::isfinite(f.peer_value) && f.peer_value != 0 && std::isfinite(f.value))
+                f.ratio = f.value / f.peer_value;
+            f.met = judge(info.target, f.value, f.ratio);
+            row.rounds.push_back(f);
+        }
+        if (peer_rounds)
+            for (const auto& [r, x] : *peer_rounds)
+                if (row.rounds_wanted > 1 || r == peer_rounds->begin()->first)
+                    peer_values.push_back(x->value);
+        row.m.value = median(values);
+        for (const auto& [r, x] : per_round) {
+            if (std::isfinite(x->min)) row.m.min = std::isfinite(row.m.min) ? std::min(row.m.min, x->min) : x->min;
+            if (std::isfinite(x->max)) row.m.max = std::isfinite(row.m.max) ? std::max(row.m.max, x->max) : x->max;
+        }
+        if (row.rounds.size() > 1) {
+            // The rounds' own figures, after the first round's description.
+            std::string rv;
+            for (const RoundFigure& f : row.rounds) {
+                char b[48];
+                std::snprintf(b, sizeof b, "%s%.4g", rv.empty() ? "" : ", ", f.value);
+                rv += b;
+            }
+            row.m.config += "; round 1 described; value = median of " +
+                            std::to_string(row.rounds.size()) + " rounds (" + rv + ")";
+        }
+        row.peer_value = median(peer_values);
+        if (std::isfinite(row.peer_value) && row.peer_value != 0 && std::isfinite(row.m.value))
+            row.ratio = row.m.value / row.peer_value;
+        if (info.target.kind != Target::kNone) {
+            // Met only when it held in every round the run asked for.
+            bool all = int(row.rounds.size()) >= row.rounds_wanted, any_figure = false;
+            for (const RoundFigure& f : row.rounds) {
+                if (f.met < 0) all = false;
+                else any_figure = true;
+                if (f.met == 0) all = false;
+            }
+            row.target_met = any_figure ? int(all) : -1;
         }
         rows.push_back(row);
     }

@@ -73,6 +73,20 @@ std::FILE* open_or_throw(const std::string& path) {
     return f;
 }
 
+// Every round's figure of a row: [{"round", "value", "peer_value", "ratio", "met"}].
+std::string rounds_json(const Row& r) {
+    std::string o = "[";
+    for (std::size_t i = 0; i < r.rounds.size(); ++i) {
+        const RoundFigure& f = r.rounds[i];
+        o += std::string(i ? ", " : "") + "{\"round\": " + std::to_string(f.round) +
+             ", \"value\": " + json_number(f.value) + ", \"peer_value\": " +
+             json_number(f.peer_value) + ", \"ratio\": " + json_number(f.ratio) + ", \"met\": " +
+             (f.met < 0 ? "null" : f.met ? "true" : "false") + ", \"config\": " +
+             json_string(f.config) + "}";
+    }
+    return o + "]";
+}
+
 }  // namespace
 
 void print_table(std::FILE* f, const std::vector<Row>& rows, const std::vector<Unmeasured>& rest) {
@@ -85,6 +99,14 @@ void print_table(std::FILE* f, const std::vector<Row>& rows, const std::vector<U
                                       : human(r.m.min, unit) + " .. " + human(r.m.max, unit);
         std::string target = target_text(r.info->target);
         if (r.target_met >= 0) target += r.target_met ? " ok" : " MISS";
+        if (r.rounds.size() > 1 && r.target_met >= 0) {
+            // Each round's figure judged: the ratio, or the value for a value target.
+            const bool by_ratio = r.info->target.kind == Target::kRatioAtMost;
+            target += " [";
+            for (std::size_t i = 0; i < r.rounds.size(); ++i)
+                target += (i ? " " : "") + fmt("%.3g", by_ratio ? r.rounds[i].ratio : r.rounds[i].value);
+            target += "]";
+        }
         std::fprintf(f, "%-37s %11s %23s  %-36s %11s %8s %-14s %10s  %s\n", r.info->name,
                      human(r.m.value, unit).c_str(), range.c_str(),
                      r.info->peer ? r.info->peer : "", human(r.peer_value, unit).c_str(),
@@ -115,7 +137,8 @@ void write_rows_json(const std::string& path, const std::vector<Row>& rows) {
             f,
             "%s\n  {\"name\": %s, \"unit\": %s, \"value\": %s, \"min\": %s, \"max\": %s, "
             "\"peer\": %s, \"peer_value\": %s, \"ratio\": %s, \"paper_value\": %s, "
-            "\"config\": %s, \"target\": %s, \"target_met\": %s, \"what\": %s}",
+            "\"config\": %s, \"target\": %s, \"target_met\": %s, \"what\": %s, "
+            "\"rounds_wanted\": %d, \"rounds\": %s}",
             i ? "," : "", json_string(r.info->name).c_str(), json_string(r.info->unit).c_str(),
             json_number(r.m.value).c_str(), json_number(r.m.min).c_str(),
             json_number(r.m.max).c_str(), json_opt(r.info->peer).c_str(),
@@ -123,7 +146,7 @@ void write_rows_json(const std::string& path, const std::vector<Row>& rows) {
             json_number(r.info->paper).c_str(), json_string(r.m.config).c_str(),
             target.empty() ? "null" : json_string(target).c_str(),
             r.target_met < 0 ? "null" : (r.target_met ? "true" : "false"),
-            json_string(r.info->what).c_str());
+            json_string(r.info->what).c_str(), r.rounds_wanted, rounds_json(r).c_str());
     }
     std::fprintf(f, "\n]\n");
     if (std::fclose(f) != 0) throw std::runtime_error("cannot write " + path);

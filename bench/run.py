@@ -95,17 +95,19 @@ def markdown(rows, rest, info, commands, quick, elapsed):
            "Values are medians over repeated runs, with the min–max over those runs; "
            "RT/2 is half a round trip. Each row states its pinning and method. "
            "The paper column is the Chimera II paper's Table 1 (25 MHz 68030, 1991), "
-           "for orientation; no ratio is taken against it.", "",
-           "## Machine", "",
-           f"* CPU: {info['cpu']}",
-           f"* cores: {info['cores']}",
-           f"* kernel: {info['kernel']}",
-           f"* virtualised: {info['virtualised']}",
-           f"* date: {info['date']}, commit `{info['commit']}`",
-           f"* mode: {'quick (few short runs: rough figures)' if quick else 'full'}; "
-           f"the run took {elapsed:.0f} s",
-           f"* command: `{commands[0]}`",
-           f"* which ran: `{commands[1]}`", ""]
+           "for orientation; no ratio is taken against it.", ""]
+    out.extend(summary_markdown(rows, rest))
+    out.extend(worst_case_markdown(rows))
+    out.extend(["## Machine", "",
+                f"* CPU: {info['cpu']}",
+                f"* cores: {info['cores']}",
+                f"* kernel: {info['kernel']}",
+                f"* virtualised: {info['virtualised']}",
+                f"* date: {info['date']}, commit `{info['commit']}`",
+                f"* mode: {'quick (few short runs: rough figures)' if quick else 'full'}; "
+                f"the run took {elapsed:.0f} s",
+                f"* command: `{commands[0]}`",
+                f"* which ran: `{commands[1]}`", ""])
     chimera = [r for r in rows if not r["name"].startswith("peer_")]
     peers = [r for r in rows if r["name"].startswith("peer_")]
 
@@ -156,6 +158,99 @@ def markdown(rows, rest, info, commands, quick, elapsed):
         out.extend(["## Skipped or failed in this run", ""])
         out.extend(f"* `{u['name']}`: {cell(u['status'])}" for u in other)
         out.append("")
+    return out
+
+
+def round_figures(r):
+    """The figure each round judged: the ratio for a ratio target, else the value."""
+    key = "ratio" if (r.get("target") or "").startswith("ratio") else "value"
+    return [x[key] for x in r.get("rounds") or [] if x.get(key) is not None]
+
+
+def spread(r):
+    """'1.10–1.30×' (ratio) or '1.1–1.3 %' (value) over the rounds, or ''."""
+    f = round_figures(r)
+    if len(f) < 2:
+        return ""
+    if (r.get("target") or "").startswith("ratio"):
+        return f"{min(f):.3g}× to {max(f):.3g}×"
+    return f"{human(min(f), r['unit'])} to {human(max(f), r['unit'])}"
+
+
+def summary_markdown(rows, rest):
+    """The one-screen summary: every target, its figure and spread, met or not."""
+    targets = [r for r in rows if r.get("target")]
+    unjudged = [u for u in rest if u.get("target")]
+    met = [r for r in targets if r.get("target_met")]
+    n_rounds = max((r.get("rounds_wanted") or 1 for r in targets), default=1)
+    out = ["## Summary", "",
+           f"**{len(met)} of {len(targets) + len(unjudged)} targets met** in this run. "
+           f"Each target row and its peer were measured in {n_rounds} interleaved "
+           f"round{'s' if n_rounds > 1 else ''} of this run; a target counts as met only when "
+           "it held in every round. A ratio is the row's figure over its peer's (lower is "
+           "better: 0.5 means twice as fast as the peer); the figure shown is the median of "
+           "the rounds, with the lowest and highest round beside it. Rows are measured in the "
+           "default configuration unless their config says otherwise.", "",
+           "| target row | figure (median of rounds) | rounds: lowest – highest | target | "
+           "verdict |",
+           "| --- | --- | --- | --- | --- |"]
+    for r in targets:
+        rf = round_figures(r)
+        if (r.get("target") or "").startswith("ratio"):
+            fig = (f"{r['ratio']:.3g}× `{r['peer']}`" if r.get("ratio") is not None
+                   else "no peer figure")
+        else:
+            fig = human(r["value"], r["unit"])
+        t = r.get("target") or ""
+        held = sum(1 for x in r.get("rounds") or [] if x.get("met"))
+        want = r.get("rounds_wanted") or 1
+        if r.get("target_met"):
+            verdict = f"**met** in all {want} rounds" if want > 1 else "**met**"
+        elif r.get("target_met") is False:
+            verdict = (f"**not met**: held in {held} of {want} rounds" if want > 1
+                       else "**not met**")
+        else:
+            verdict = "not judged (no figure to judge it by)"
+        out.append(f"| `{r['name']}` | {fig} | {spread(r) or '–'} | "
+                   f"{t.replace('<=', '≤').replace('>=', '≥')} | {verdict} |")
+    for u in unjudged:
+        out.append(f"| `{u['name']}` | – | – | {u['target'].replace('<=', '≤')} | "
+                   f"not judged: {cell(u['status'])} |")
+    out.append("")
+    return out
+
+
+def count_in(text, pattern):
+    """The integer a config sentence gives for `pattern` (a regex with one group)."""
+    import re
+    m = re.search(pattern, text or "")
+    return int(m.group(1)) if m else None
+
+
+def worst_case_markdown(rows):
+    """Worst cases: every lateness row's greatest lateness, late cycles and misses."""
+    late = [r for r in rows if r["name"].startswith("release_lateness")]
+    if not late:
+        return []
+    out = ["## Worst cases", "",
+           "Release lateness of the 1 kHz periodic tasks, over every cycle of every round "
+           "(cycles that began one or more whole periods late included). The peer's figure is "
+           "its own maximum in the same run.", "",
+           "| row | p99 (median of rounds) | greatest lateness | cycles begun ≥ 1 period late | "
+           "deadline misses | rounds |",
+           "| --- | ---: | ---: | ---: | ---: | ---: |"]
+    for r in late:
+        rounds = r.get("rounds") or [{"config": r["config"]}]
+        over = [count_in(x.get("config"), r"(\d+) cycles began >= 1 period late") for x in rounds]
+        miss = [count_in(x.get("config"), r"(\d+) deadline misses") for x in rounds]
+        fmt = lambda xs: " + ".join("?" if x is None else str(x) for x in xs)
+        out.append(f"| `{r['name']}` | {human(r['value'], 'ns')} | {human(r['max'], 'ns')} | "
+                   f"{fmt(over)} | {fmt(miss)} | {len(rounds)} |")
+    peer = next((r for r in rows if r["name"] == "peer_sigwait_1khz_lateness_max"), None)
+    if peer:
+        out.append(f"| `{peer['name']}` (peer) | – | {human(peer['max'] or peer['value'], 'ns')} "
+                   f"| – | – | {len(peer.get('rounds') or [1])} |")
+    out.extend(["", "Counts are per round, in round order (round 1 + round 2 + ...).", ""])
     return out
 
 
@@ -267,9 +362,9 @@ def lateness_markdown(loops):
     if not rows:
         return []
     return ["## Release lateness of the 1 kHz loops", "",
-            "Every sampled period of each loop in this run (the rows above give the p99 "
-            "over repeated runs; a period that began a whole period late counts as missed, "
-            "as in the peer, and is not sampled).", "",
+            "Every period of each loop in its last round (the rows above give the p99, the "
+            "median over the rounds; a cycle that began one or more whole periods late is "
+            "sampled with its lateness, in Chimera's loops and in the peer's alike).", "",
             "| loop | periods | p50 | p99 | p99.9 | max |",
             "| --- | ---: | ---: | ---: | ---: | ---: |", *rows, ""]
 
@@ -305,27 +400,37 @@ def plots(rows, lateness, outdir, exps=None):
         save(fig, "lateness.png", "Release lateness of the 1 kHz loops (log count)")
 
     # Chimera rows against their peers, with the target where there is one.
-    rr = [r for r in rows if r["ratio"] is not None]
+    # Peers (rows named peer_*) have no bar here: only Chimera's rows.
+    rr = [r for r in rows if r["ratio"] is not None and not r["name"].startswith("peer_")]
     if rr:
-        fig, ax = plt.subplots(figsize=(8, 0.5 * len(rr) + 1.5))
+        fig, ax = plt.subplots(figsize=(9, 0.5 * len(rr) + 2.2))
         names = [r["name"] for r in rr]
         colors = ["tab:green" if r.get("target_met") else
                   "tab:red" if r.get("target_met") is False else "tab:blue" for r in rr]
         ax.barh(names, [r["ratio"] for r in rr], color=colors)
         for i, r in enumerate(rr):
+            rs = [x["ratio"] for x in r.get("rounds") or [] if x.get("ratio") is not None]
+            if len(rs) > 1:  # the rounds' spread
+                ax.plot([min(rs), max(rs)], [i, i], color="black", lw=1)
             t = r.get("target") or ""
             if t.startswith("ratio <="):
                 b = float(t.split()[-1])
                 ax.plot([b, b], [i - 0.4, i + 0.4], color="black", lw=2)
         for i, r in enumerate(rr):
-            ax.annotate(f" {r['ratio']:.2f}x", (r["ratio"], i), va="center", fontsize=8)
+            ax.annotate(f" {r['ratio']:.3g}x", (r["ratio"], i), va="center", fontsize=8)
         ax.axvline(1, color="grey", lw=0.8, ls="--")
         ax.set_xscale("log")
         lo = min(0.5, min(r["ratio"] for r in rr) / 2)
         ax.set_xlim(lo, max(2.0, max(r["ratio"] for r in rr) * 2))
-        ax.set_xlabel("value / peer value (same run); black tick = target")
+        ax.set_xlabel("row / its peer, same run — LOWER IS BETTER. Log scale: 1 (dashed) = as "
+                      "fast as the peer,\n0.5 = twice as fast, 2 = twice as slow. Thick tick = "
+                      "target; thin line = lowest–highest round", fontsize=8)
+        ax.set_title("Chimera rows over their peers (green: target met in every round, red: "
+                     "not, blue: no target)", fontsize=9)
         ax.invert_yaxis()
-        save(fig, "ratios.png", "Chimera rows over their peers (green: target met, red: missed)")
+        save(fig, "ratios.png", "Chimera rows over their peers, lower is better, log scale "
+                                "(green: target met in every round, red: missed in a round, "
+                                "blue: no target; thin line: the rounds' spread)")
 
     # Where the time goes: every peer on one log scale.
     pr = [r for r in rows if r["name"].startswith("peer_") and r["unit"] == "ns"
@@ -399,7 +504,7 @@ def plots(rows, lateness, outdir, exps=None):
     if sm:
         xs = sm["bytes"]
         fig, ax = plt.subplots(figsize=(8, 4.5))
-        labels = {"chimera_msgq_xrtpu": "Chimera msgq, queue in another RTPU's window",
+        labels = {"chimera_msgq_remote_one_process": "Chimera msgq, queue in another RTPU's window",
                   "boost_message_queue": "Boost.Interprocess message_queue",
                   "posix_mq": "POSIX mq (where msgsize_max allows)",
                   "memcpy_x2": "two memcpy of the size (for scale)"}

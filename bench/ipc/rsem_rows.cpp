@@ -78,7 +78,7 @@ void rsem_handoff(Session& s) {
             chm_rsem_v(po);
         }
     });
-    s.time_ops("rsem_handoff_sleeping",
+    s.time_ops("rsem_handoff_sleeping_host_processes",
                "same core (" + s.cpu_name(0) +
                    "), two host processes, each sleeping on its waiter record's futex; RT/2",
                [&](std::uint64_t n) {
@@ -89,7 +89,7 @@ void rsem_handoff(Session& s) {
                },
                2);
 }
-CHM_BENCH_MEASUREMENT(rsem_handoff, "rsem_handoff_sleeping");
+CHM_BENCH_MEASUREMENT(rsem_handoff, "rsem_handoff_sleeping_host_processes");
 
 }  // namespace
 }  // namespace chm::bench

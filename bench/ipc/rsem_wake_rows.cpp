@@ -204,10 +204,13 @@ double pass_line(Floor& fl, chm_rsem_t* ping, chm_rsem_t* pong, std::uint64_t n)
 }
 
 // `floor_row` non-null: the row's floor measured with it, run by run in turn.
+// `same_core`: RTPU 2 runs on RTPU 1's CPU (the sleeping hand-off, judged
+// beside two processes on one core).
 void rsem_xrtpu(Session& s, const std::string& row, std::uint64_t poll_ns, const std::string& mode,
-                const char* floor_row = nullptr) {
-    s.need_cpus(2);
+                const char* floor_row = nullptr, bool same_core = false) {
+    if (!same_core) s.need_cpus(2);
     Session::pin(s.cpu(0));
+    const int other_cpu = same_core ? s.cpu(0) : s.cpu(1);
     const kb::TickClock& clk = kb::tick_clock();
     ipcb::BackplaneFile f("rsem2");
     ipcb::Joined me(f.path, 1);
@@ -217,7 +220,7 @@ void rsem_xrtpu(Session& s, const std::string& row, std::uint64_t poll_ns, const
     if (const int r = chm_shm_create("floor", sizeof(Floor) + 64, CHM_SHM_COMMON, &segment))
         ipcb::fail_bp("chm_shm_create floor", r);
     Floor& fl = *new (floor_in(segment)) Floor;
-    auto child = ipcb::rtpu_child(s.cpu(1), f.path, 2, poll_ns, ipcb::child_limit(s), [](ipcb::Kernel& k) {
+    auto child = ipcb::rtpu_child(other_cpu, f.path, 2, poll_ns, ipcb::child_limit(s), [](ipcb::Kernel& k) {
         static std::function<void()> body;
         body = [] {
             chm_rsem_t *pi = nullptr, *po = nullptr;
@@ -241,8 +244,9 @@ void rsem_xrtpu(Session& s, const std::string& row, std::uint64_t poll_ns, const
         ipcb::Kernel k(1, poll_ns);
         std::function<void()> body = [&] {
             const std::string cfg =
-                "cross core: RTPU 1 (this process) pinned " + s.cpu_name(0) + ", RTPU 2 (a forked " +
-                "process) pinned " + s.cpu_name(1) + ", a priority-10 task on each, FIXED policy, " + mode +
+                std::string(same_core ? "same core" : "cross core") + ": RTPU 1 (this process) pinned " +
+                s.cpu_name(0) + ", RTPU 2 (a forked process, its own kernel) pinned cpu" +
+                std::to_string(other_cpu) + ", a priority-10 task on each, FIXED policy, " + mode +
                 "; counting semaphores in common memory; chm_rsem_v on one RTPU until the task it "
                 "wakes on the other returns from chm_rsem_p; RT/2 of the ping-pong";
             // The caller's side alone: the V that grants and rings the other
@@ -315,6 +319,15 @@ void rsem_polling_row(Session& s) {
                "peer_cacheline_pingpong_rtpus");
 }
 CHM_BENCH_MEASUREMENT(rsem_polling_row, "rsem_handoff_polling", "peer_cacheline_pingpong_rtpus");
+
+// The hand-off to a sleeping RTPU through kernels on both ends (doorbell,
+// grant, task switch), both RTPUs on one core as its peer's two processes.
+void rsem_sleeping_row(Session& s) {
+    rsem_xrtpu(s, "rsem_handoff_sleeping", 0,
+               "idle_poll_ns 0 (an idle RTPU sleeps on its doorbell's futex at once)", nullptr,
+               true);
+}
+CHM_BENCH_MEASUREMENT(rsem_sleeping_row, "rsem_handoff_sleeping");
 
 }  // namespace
 }  // namespace chm::bench

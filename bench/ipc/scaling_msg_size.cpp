@@ -1,10 +1,10 @@
 // Cost against the message size (24 B to 64 KiB): the data of
-// docs/bench/scaling_msg_size.png and the rows msgq_putget_64k_xrtpu /
+// docs/bench/scaling_msg_size.png and the rows msgq_putget_64k_remote_one_process /
 // peer_bipc_mq_64k_one_thread. For each size, in one process pinned to one
 // CPU, put+get with nobody waiting:
-//   chimera_msgq_xrtpu   chm_msgq_try_send + try_receive, this process joined
+//   chimera_msgq_remote_one_process   chm_msgq_try_send + try_receive, this process joined
 //                        as RTPU 1, the queue (4 slots of the size) in RTPU
-//                        2's window (as msgq_putget_24b_xrtpu)
+//                        2's window (as msgq_putget_24b_remote_one_process)
 //   boost_message_queue  Boost.Interprocess message_queue send + receive
 //   posix_mq             mq_send + mq_receive (where the system's
 //                        msgsize_max allows the size; null elsewhere)
@@ -138,18 +138,18 @@ void msg_size_scaling(Session& s) {
                              (posix_note.empty() ? std::string() : ", \"posix_mq_note\": \"" + posix_note + "\"");
     s.write_data("scaling_msg_size",
                  ipcb::series_json("bytes", xs, "series",
-                                   {{"chimera_msgq_xrtpu", chm}, {"boost_message_queue", boost},
+                                   {{"chimera_msgq_remote_one_process", chm}, {"boost_message_queue", boost},
                                     {"posix_mq", posix}, {"memcpy_x2", copy}},
                                    note));
     const std::string where = "one process pinned " + s.cpu_name(0) + ", 64 KiB messages, queue of 4 slots";
-    s.emit("msgq_putget_64k_xrtpu",
+    s.emit("msgq_putget_64k_remote_one_process",
            where + " in RTPU 2's window (this process is RTPU 1); try_send + try_receive, never blocks; "
                    "two memcpy of 64 KiB alone: " + kb::fmt_ns(copy.median.back()),
            chm64.median, chm64.min, chm64.max);
     s.emit("peer_bipc_mq_64k_one_thread", where + "; send + receive in one thread, never blocks", boost64.median,
            boost64.min, boost64.max);
 }
-CHM_BENCH_MEASUREMENT(msg_size_scaling, "msgq_putget_64k_xrtpu", "peer_bipc_mq_64k_one_thread");
+CHM_BENCH_MEASUREMENT(msg_size_scaling, "msgq_putget_64k_remote_one_process", "peer_bipc_mq_64k_one_thread");
 
 }  // namespace
 }  // namespace chm::bench

@@ -1,6 +1,6 @@
 // Peer: Boost.Interprocess message_queue, the C++ shared-memory queue a user
 // would pick instead of Chimera's message queues: 24-byte send+receive in one
-// thread (the target for msgq_putget_24b_xrtpu), send alone and receive alone
+// thread (the target for msgq_putget_24b_remote_one_process), send alone and receive alone
 // (beside the paper's put and get), and a round trip between two processes.
 #include <boost/date_time/posix_time/posix_time_types.hpp>
 #include <boost/interprocess/ipc/message_queue.hpp>
@@ -108,6 +108,45 @@ void bipc_mq_rt2(Session& s) {
     });
 }
 CHM_BENCH_MEASUREMENT(bipc_mq_rt2, "peer_bipc_mq_24b_rt2_same_core", "peer_bipc_mq_24b_rt2_xcore");
+
+// Streaming between two processes on two cores, as msgq_stream_24b_xrtpu:
+// 64 slots, blocking send and receive, a run's last message answered on a
+// second queue; ns per message.
+void bipc_mq_stream(Session& s) {
+    s.need_cpus(2);
+    Session::pin(s.cpu(0));
+    auto data = make_queue("data", 64);
+    auto ack = make_queue("ack", 4);
+    Child child(s.cpu(1), [&] {
+        char buf[kMsg];
+        std::size_t got;
+        unsigned prio;
+        for (;;) {
+            data->receive(buf, sizeof buf, got, prio);
+            if (buf[0] == 1) ack->send(buf, kMsg, 0);
+        }
+        return 0;
+    });
+    s.time_ops("peer_bipc_mq_stream_24b_xcore",
+               "cross core: sender (this process) pinned " + s.cpu_name(0) + ", receiver (a forked "
+               "process) pinned " + s.cpu_name(1) + ", SCHED_OTHER; 64 slots, blocking send / "
+               "receive; per message, a run's last message answered on a second queue",
+               [&](std::uint64_t n) {
+                   const auto deadline = boost::posix_time::microsec_clock::universal_time() +
+                                         boost::posix_time::seconds(20);
+                   char buf[kMsg];
+                   std::memset(buf, 0, sizeof buf);
+                   std::size_t got;
+                   unsigned prio;
+                   for (std::uint64_t i = 0; i < n; ++i) {
+                       buf[0] = i + 1 == n ? 1 : 0;
+                       data->send(buf, kMsg, 0);
+                   }
+                   if (!ack->timed_receive(buf, sizeof buf, got, prio, deadline))
+                       throw std::runtime_error("message_queue: no answer from the peer process");
+               });
+}
+CHM_BENCH_MEASUREMENT(bipc_mq_stream, "peer_bipc_mq_stream_24b_xcore");
 
 }  // namespace
 }  // namespace chm::bench

@@ -1,6 +1,6 @@
 // Peer: Boost.Context `fiber`, the user-space switch a C++ user would pick.
 // Its switch is the yardstick of the port's switch and of yield_switch; its
-// create+destroy is the floor for task_spawn_destroy.
+// create+run+destroy stands beside task_spawn_run_exit (task_spawn_run_exit_vs_fiber).
 #include <boost/context/fiber.hpp>
 #include <boost/context/pooled_fixedsize_stack.hpp>
 

@@ -1,5 +1,5 @@
 // Peers: the kernel thread as a task. pthread_create+join is what
-// task_create/destroy and task_spawn_destroy are judged against (glibc caches
+// task_create/destroy and task_spawn_run_exit are judged against (glibc caches
 // thread stacks, so this is its best case); pthread_setschedparam stands
 // beside task_set_priority.
 #include <pthread.h>
