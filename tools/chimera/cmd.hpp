@@ -24,6 +24,9 @@ void nap_ms(unsigned ms);
 // Log file of RTPU n of the system on `backplane`.
 std::string log_path(const std::string& backplane, int n);
 
+// An existing backplane file we may attach (chm_bp_check_file) and whose
+// table and objects are sound (chm_bp_validate); says why not.
+bool file_fit_to_use(const std::string& path);
 int cmd_status(const Options& o);
 int cmd_stop(const Options& o);
 int cmd_rm(const Options& o);

@@ -221,17 +221,9 @@ int cmd_start(const Options& o, const StartPlan& p) {
     bool created = false;
     struct stat ls{};
     if (lstat(o.backplane.c_str(), &ls) == 0) {
-        // An existing file is checked (who may attach it) and validated
-        // (its structure) before any RTPU starts on it: refused here, once,
-        // not by every RTPU as it joins.
-        if (chm_bp_check_file(o.backplane.c_str()) != 0) {
-            say("%s", chm_bp_last_error());
-            return 1;
-        }
-        if (chm_bp_validate(o.backplane.c_str()) != 0) {
-            say("refusing %s: %s", o.backplane.c_str(), chm_bp_last_error());
-            return 1;
-        }
+        // An existing file is checked before any RTPU starts on it:
+        // refused here, once, not by every RTPU as it joins.
+        if (!file_fit_to_use(o.backplane)) return 1;
     } else {
         chm_bp_config_t cfg;
         chm_bp_config_init(&cfg);

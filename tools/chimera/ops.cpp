@@ -108,21 +108,24 @@ void print_tasks(int slot) {
 
 }  // namespace
 
-int cmd_status(const Options& o) {
-    // Who may attach it first (a file we must not trust is not even
-    // read), then the whole table and every object in it, before anything
-    // is shown: a table that fails validation is refused, naming the field.
-    struct stat ls{};
-    if (lstat(o.backplane.c_str(), &ls) == 0) {
-        if (chm_bp_check_file(o.backplane.c_str()) != 0) {
-            say("%s", chm_bp_last_error());
-            return 1;
-        }
-        if (chm_bp_validate(o.backplane.c_str()) != 0) {
-            say("refusing %s: %s", o.backplane.c_str(), chm_bp_last_error());
-            return 1;
-        }
+bool file_fit_to_use(const std::string& path) {
+    // Who may attach it first (a file we must not trust is not even read),
+    // then the whole table and every object in it, naming the field.
+    if (chm_bp_check_file(path.c_str()) != 0) {
+        say("%s", chm_bp_last_error());
+        return false;
     }
+    if (chm_bp_validate(path.c_str()) != 0) {
+        say("refusing %s: %s", path.c_str(), chm_bp_last_error());
+        return false;
+    }
+    return true;
+}
+
+int cmd_status(const Options& o) {
+    // Nothing is shown of a table that fails validation.
+    struct stat ls{};
+    if (lstat(o.backplane.c_str(), &ls) == 0 && !file_fit_to_use(o.backplane)) return 1;
     if (attach(o)) return 1;
     chm_bp_status_t st;
     chm_bp_status(&st);

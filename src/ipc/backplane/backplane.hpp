@@ -115,6 +115,8 @@ Attachment* current();
 // region that does not fit): -EBADMSG, as for a bad file header, with
 // chm_bp_last_error() naming the object and the field. Never a crash.
 inline constexpr int kCorrupt = -EBADMSG;
+// Write the field's description into `why` (n bytes) and return kCorrupt.
+int corrupt(char* why, std::size_t n, const char* fmt, ...) __attribute__((format(printf, 3, 4)));
 
 // Why an operation failed, for chm_bp_last_error() (thread-local).
 void set_error(const char* fmt, ...) __attribute__((format(printf, 1, 2)));

@@ -24,11 +24,6 @@
 
 namespace chm::bp {
 
-namespace {
-
-constexpr auto R = std::memory_order_relaxed;
-
-int corrupt(char* why, std::size_t n, const char* fmt, ...) __attribute__((format(printf, 3, 4)));
 int corrupt(char* why, std::size_t n, const char* fmt, ...) {
     va_list ap;
     va_start(ap, fmt);
@@ -36,6 +31,11 @@ int corrupt(char* why, std::size_t n, const char* fmt, ...) {
     va_end(ap);
     return kCorrupt;
 }
+
+namespace {
+
+constexpr auto R = std::memory_order_relaxed;
+
 
 const char* arena_text(std::uint32_t where) { return where == kWhereCommon ? "common memory" : "an RTPU window"; }
 

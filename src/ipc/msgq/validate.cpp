@@ -15,15 +15,8 @@ namespace chm::ipc::msgq {
 namespace {
 
 constexpr auto R = std::memory_order_relaxed;
+using bp::corrupt;
 
-int corrupt(char* why, std::size_t n, const char* fmt, ...) __attribute__((format(printf, 3, 4)));
-int corrupt(char* why, std::size_t n, const char* fmt, ...) {
-    va_list ap;
-    va_start(ap, fmt);
-    std::vsnprintf(why, n, fmt, ap);
-    va_end(ap);
-    return bp::kCorrupt;
-}
 
 bool index_ok(std::uint32_t i, const Geo& g) { return i == kNil || i < g.max_count; }
 

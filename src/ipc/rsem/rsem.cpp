@@ -78,14 +78,6 @@ Rsem* from_handle(chm_rsem_t* h) {
     return s->magic.load(std::memory_order_relaxed) == kRsemMagic ? s : nullptr;
 }
 
-int corrupt(char* why, std::size_t n, const char* fmt, ...) __attribute__((format(printf, 3, 4)));
-int corrupt(char* why, std::size_t n, const char* fmt, ...) {
-    va_list ap;
-    va_start(ap, fmt);
-    std::vsnprintf(why, n, fmt, ap);
-    va_end(ap);
-    return kCorrupt;
-}
 
 // A semaphore's words that open checks: its kind, a binary count of at
 // most 1, every record's state and nwaiting against the records (V's
