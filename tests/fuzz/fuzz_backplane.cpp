@@ -114,7 +114,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     chm::bp::View v;
     int fd = -1;
     char why[320];
-    if (chm::bp::map_file(g_path.c_str(), false, &v, &fd, why, sizeof why) == 0) {
+    if (chm::bp::map_file(g_path.c_str(), false, &v, &fd, why, sizeof why, false) == 0) {
         chm::bp::Report rep;
         chm::bp::check_backplane(v, rep, nullptr);
         chm::bp::unmap(&v);
