@@ -37,9 +37,17 @@ def sh(*cmd):
         return ""
 
 
-# The commit measured, read before the run writes its results into the tree
-# (read after, it would always say "-dirty").
-COMMIT = sh("git", "-C", str(ROOT), "describe", "--always", "--dirty")
+# The commit measured, read before the run writes its results into the
+# tree; "-dirty" only when something other than a previous run's output
+# (results, report, plots) differs from it.
+def measured_commit():
+    head = sh("git", "-C", str(ROOT), "describe", "--always")
+    changed = sh("git", "-C", str(ROOT), "status", "--porcelain", "--untracked-files=no", "--", ".",
+                 ":!bench/results.json", ":!bench/experiments.json", ":!docs/benchmarks.md", ":!docs/bench")
+    return head + ("-dirty" if changed.strip() else "")
+
+
+COMMIT = measured_commit()
 
 
 def machine():
