@@ -55,7 +55,6 @@ Module g_modules[CHM_ERR_MODULES_MAX + 1] = {
 };
 int g_nmodules = 3;
 int g_rtpu = -1;  // -1: the kernel config's rtpu_id
-Tcb* g_aborting = nullptr;
 
 bool module_ok(int m) { return m > 0 && m <= g_nmodules; }
 
@@ -213,15 +212,14 @@ void err_abort_current() {
     // Its devices first, in task context: actuators it drives go to their
     // safe stop and its descriptors close before anything else runs.
     chm_dev_task_abort(chm_task_self());
-    port::irq_disable();
-    g_aborting = g_k.current;
-    port::irq_restore();
+    // Its end hooks run before its end; the end reason (not a global,
+    // which another task's abort could overwrite meanwhile) says it was
+    // aborted, so its semaphores pass on with owner-died semantics.
     task_end_current(CHM_TASK_ABORTED, 0);
 }
 
 void err_task_ended_locked(Tcb* t) {
-    sem_release_held_locked(t, t == g_aborting);
-    if (t == g_aborting) g_aborting = nullptr;
+    sem_release_held_locked(t, t->end_reason == CHM_TASK_ABORTED);
     if (t->stack_lo && !stack_canary_ok(t)) {
         chm_err_info_t info{};
         info.module = CHM_ERR_KERNEL;
