@@ -143,10 +143,7 @@ int take_slot(const View& v, std::uint32_t s, SlotKind kind, const char* name, b
 
 int attach(const char* path, int want, SlotKind kind, const char* name, int* slot_out) {
     char defpath[4096];
-    if (!path) {
-        if (chm_bp_default_path(defpath, sizeof defpath)) return set_error("default backplane path too long"), -ENAMETOOLONG;
-        path = defpath;
-    }
+    if (int r = path_or_default(&path, defpath, sizeof defpath)) return r;
     if (std::strlen(path) >= sizeof g_att.path) return set_error("backplane path too long"), -ENAMETOOLONG;
     char autoname[kNameMax + 1];
     if (!name) {

@@ -120,6 +120,9 @@ int corrupt(char* why, std::size_t n, const char* fmt, ...) __attribute__((forma
 
 // Why an operation failed, for chm_bp_last_error() (thread-local).
 void set_error(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
+// `*path`, or when it is NULL the default backplane path written into buf
+// (n bytes) and put in *path. 0, or -ENAMETOOLONG with set_error saying so.
+int path_or_default(const char** path, char* buf, std::size_t n);
 
 // Check a header against the file's size before anything is trusted.
 // Returns 0 or -EBADMSG with `why` naming the field.

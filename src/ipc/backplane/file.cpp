@@ -257,11 +257,7 @@ void chm_bp_config_init(chm_bp_config_t* cfg) {
 
 int chm_bp_create(const char* path, const chm_bp_config_t* cfg) {
     char defpath[4096];
-    if (!path) {
-        const int r = chm_bp_default_path(defpath, sizeof defpath);
-        if (r) return set_error("default backplane path too long"), r;
-        path = defpath;
-    }
+    if (int r = path_or_default(&path, defpath, sizeof defpath)) return r;
     chm_bp_config_t c;
     chm_bp_config_init(&c);
     if (cfg) c = *cfg;

@@ -170,6 +170,21 @@ int chm_bp_default_path(char* buf, size_t len) {
     return (k < 0 || size_t(k) >= len) ? -ENAMETOOLONG : 0;
 }
 
+}  // extern "C"
+
+namespace chm::bp {
+
+int path_or_default(const char** path, char* buf, std::size_t n) {
+    if (*path) return 0;
+    if (const int r = chm_bp_default_path(buf, n)) return set_error("default backplane path too long"), r;
+    *path = buf;
+    return 0;
+}
+
+}  // namespace chm::bp
+
+extern "C" {
+
 int chm_bp_check_dir(const char* dir, int create) {
     if (!dir || !*dir) return set_error("backplane directory: empty path"), -EINVAL;
     if (create && ::mkdir(dir, 0700) != 0 && errno != EEXIST) {
@@ -214,10 +229,7 @@ int chm_bp_check_dir(const char* dir, int create) {
 
 int chm_bp_check_file(const char* path) {
     char defpath[4096];
-    if (!path) {
-        if (chm_bp_default_path(defpath, sizeof defpath)) return set_error("default backplane path too long"), -ENAMETOOLONG;
-        path = defpath;
-    }
+    if (int r = path_or_default(&path, defpath, sizeof defpath)) return r;
     View v;
     int fd = -1;
     char why[640];

@@ -179,10 +179,7 @@ using namespace chm::bp;
 
 extern "C" int chm_bp_validate(const char* path) {
     char defpath[4096];
-    if (!path) {
-        if (chm_bp_default_path(defpath, sizeof defpath)) return set_error("default backplane path too long"), -ENAMETOOLONG;
-        path = defpath;
-    }
+    if (int r = path_or_default(&path, defpath, sizeof defpath)) return r;
     View v;
     int fd = -1;
     char why[768];
