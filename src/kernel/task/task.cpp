@@ -80,12 +80,8 @@ int check_attr(const chm_task_attr_t& a, std::size_t* stack) {
 }  // namespace
 
 Tcb* tcb_lookup(chm_tid_t id) {
-    if (id < 0 || !g_k.tcbs) return nullptr;
-    const std::uint32_t i = std::uint32_t(id) & 0xffff;
-    if (i >= g_k.tcb_hw) return nullptr;
-    Tcb* t = &g_k.tcbs[i];
-    if (!t->used || t->gen != (std::uint32_t(id) >> 16) || t->state == TaskState::Ended) return nullptr;
-    return t;
+    Tcb* t = tcb_lookup_ended_too(id);
+    return t && t->used && t->state != TaskState::Ended ? t : nullptr;
 }
 
 // A task that ended keeps its TCB (state Ended, generation) until the slot
