@@ -19,6 +19,7 @@
 #include "chimera/sensor.h"
 #include "chimera/shm.h"
 #include "chimera/spin.h"
+#include "chimera/svar.h"
 #include "chimera/task.h"
 #include "chimera/usig.h"
 

@@ -366,6 +366,12 @@ void check_entry(const bp::View& v, std::uint32_t off, std::uint32_t size, const
 // prefixed by `name`.
 int rsem_validate(const bp::View& v, std::uint32_t off, std::uint32_t size, const char* name, char* why,
                   std::size_t n);
+// The state-variable table (src/ipc/svar): all three hooks.
+void svar_recover(const bp::View& v, std::uint32_t entry_index, std::uint32_t dead_slot,
+                  std::uint32_t dead_gen, std::uint32_t recovery_token);
+void svar_check(const bp::View& v, std::uint32_t off, std::uint32_t size, const char* name, bp::Report& r);
+int svar_validate(const bp::View& v, std::uint32_t off, std::uint32_t size, const char* name, char* why,
+                  std::size_t n);
 namespace msgq {
 int validate_entry(const bp::View& v, std::uint32_t off, std::uint32_t size, const char* name, char* why,
                    std::size_t n);

@@ -92,6 +92,7 @@ void check_object(const View& v, const RegistryEntry* e, std::uint32_t i, const 
     switch (e->kind.load(R)) {
     case kKindRemoteSem: chm::ipc::rsem_check(v, off, size, label, r); break;
     case kKindMsgQueue: chm::ipc::msgq::check_entry(v, off, size, label, r); break;
+    case kKindStateVars: chm::ipc::svar_check(v, off, size, label, r); break;
     default: break;
     }
 }

@@ -166,9 +166,9 @@ enum class EntryState : std::uint32_t { Free = 0, Live = 1, Destroying = 2 };
 enum ObjectKind : std::uint32_t {
     kKindNone = 0,
     kKindShm = 1,        // global shared memory segment (src/ipc/shm)
-    kKindRemoteSem = 2,  // reserved: remote semaphores
-    kKindMsgQueue = 3,   // reserved: message queues
-    kKindStateVars = 4,  // reserved: state-variable table
+    kKindRemoteSem = 2,  // remote semaphores (src/ipc/rsem)
+    kKindMsgQueue = 3,   // message queues (src/ipc/msgq)
+    kKindStateVars = 4,  // the global state-variable table (src/ipc/svar)
     kKindMax = 32
 };
 

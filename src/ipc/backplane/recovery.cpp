@@ -41,6 +41,7 @@ constexpr Builtin kBuiltinRecovery[] = {
     {kKindNone, nullptr},
     {kKindRemoteSem, chm::ipc::rsem_recover},
     {kKindMsgQueue, chm::ipc::msgq::recover},
+    {kKindStateVars, chm::ipc::svar_recover},
 };
 
 RecoverFn recovery_fn(std::uint32_t kind) {

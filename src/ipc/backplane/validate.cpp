@@ -168,6 +168,7 @@ int validate_file(const View& v, char* why, std::size_t n) {
         int r = 0;
         if (w.kind == kKindMsgQueue) r = chm::ipc::msgq::validate_entry(v, w.offset, w.size, label, why, n);
         else if (w.kind == kKindRemoteSem) r = chm::ipc::rsem_validate(v, w.offset, w.size, label, why, n);
+        else if (w.kind == kKindStateVars) r = chm::ipc::svar_validate(v, w.offset, w.size, label, why, n);
         if (r) return r;
     }
     return 0;
