@@ -122,6 +122,13 @@ constexpr RowInfo kRows[] = {
      "remote semaphore hand-off between two host processes (no kernel) on one core, RT/2"},
     {"rsem_handoff_polling", "ns", "peer_cacheline_pingpong_rtpus", kNull, ratio_le(3),
      "remote semaphore hand-off to a polling RTPU, RT/2"},
+    // ---- state variables (issue 18): a set with one input and one output
+    // of N doubles; one operation = chm_svar_set_read + chm_svar_set_write,
+    // judged beside memcpy of the same bytes (2 x N x 8), measured in turn.
+    {"svar_copy_in_out_64d", "ns", "peer_memcpy_1kib", kNull, {Target::kRatioPlusAtMost, 1.5, 100},
+     "copy-in + copy-out of a 64-double input and a 64-double output (1 KiB in all)"},
+    {"svar_copy_in_out_1024d", "ns", "peer_memcpy_16kib", kNull, {Target::kRatioPlusAtMost, 1.5, 100},
+     "copy-in + copy-out of a 1024-double input and a 1024-double output (16 KiB in all)"},
     // ---- scaling (issue 6 item 5): the curves are in scaling_rtpus.png and
     // scaling_msg_size.png; one figure of each is a row
     {"msgq_putget_64k_remote_one_process", "ns", "peer_bipc_mq_64k_one_thread", kNull, none,
@@ -238,6 +245,8 @@ constexpr RowInfo kRows[] = {
      "mmap + munmap of a 64 KiB stack, its top page touched"},
     {"peer_array_read", "ns", nullptr, kNull, none, "sum of a 64 KiB local array, per 8-byte word"},
     {"peer_array_write", "ns", nullptr, kNull, none, "fill of a 64 KiB local array, per 8-byte word"},
+    {"peer_memcpy_1kib", "ns", nullptr, kNull, none, "memcpy of 512 B, twice (1 KiB in all), cache-resident"},
+    {"peer_memcpy_16kib", "ns", nullptr, kNull, none, "memcpy of 8 KiB, twice (16 KiB in all), cache-resident"},
     // ---- peers: timers and signals
     {"peer_timer_settime", "ns", nullptr, kNull, none, "timer_settime re-arming a POSIX timer"},
     {"peer_signal_self", "ns", nullptr, kNull, none,

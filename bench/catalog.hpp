@@ -8,9 +8,12 @@
 namespace chm::bench {
 
 // A target on the row's ratio (value / peer value) or on its value itself.
+// kRatioPlusAtMost: value <= bound x peer value + plus (a fixed allowance
+// in the row's unit, for a cost that does not scale with the peer's work).
 struct Target {
-    enum Kind { kNone, kRatioAtMost, kValueAtMost, kValueBelow, kValueAtLeast } kind = kNone;
+    enum Kind { kNone, kRatioAtMost, kValueAtMost, kValueBelow, kValueAtLeast, kRatioPlusAtMost } kind = kNone;
     double bound = 0;
+    double plus = 0;
 };
 
 struct RowInfo {

@@ -268,9 +268,11 @@ int run(const Cli& cli) {
         const std::size_t h = v.size() / 2;
         return v.size() % 2 ? v[h] : (v[h - 1] + v[h]) / 2;
     };
-    auto judge = [](const Target& t, double v, double ratio) -> int {
+    auto judge = [](const Target& t, double v, double ratio, double peer) -> int {
         switch (t.kind) {
         case Target::kNone: return -1;
+        case Target::kRatioPlusAtMost:
+            return std::isfinite(v) && std::isfinite(peer) ? v <= t.bound * peer + t.plus : -1;
         case Target::kRatioAtMost: return std::isfinite(ratio) ? ratio <= t.bound : -1;
         case Target::kValueAtMost: return std::isfinite(v) ? v <= t.bound : -1;
         case Target::kValueBelow: return std::isfinite(v) ? v < t.bound : -1;
@@ -314,7 +316,7 @@ int run(const Cli& cli) {
             }
             if (std::isfinite(f.peer_value) && f.peer_value != 0 && std::isfinite(f.value))
                 f.ratio = f.value / f.peer_value;
-            f.met = judge(info.target, f.value, f.ratio);
+            f.met = judge(info.target, f.value, f.ratio, f.peer_value);
             row.rounds.push_back(f);
         }
         if (peer_rounds)

@@ -35,6 +35,7 @@ std::string target_text(const Target& t) {
     switch (t.kind) {
     case Target::kNone: return "";
     case Target::kRatioAtMost: return "ratio <= " + fmt("%g", t.bound);
+    case Target::kRatioPlusAtMost: return "ratio <= " + fmt("%g", t.bound) + " +" + fmt("%g", t.plus) + "/peer";
     case Target::kValueAtMost: return "value <= " + fmt("%g", t.bound);
     case Target::kValueBelow: return "value < " + fmt("%g", t.bound);
     case Target::kValueAtLeast: return "value >= " + fmt("%g", t.bound);
@@ -101,7 +102,8 @@ void print_table(std::FILE* f, const std::vector<Row>& rows, const std::vector<U
         if (r.target_met >= 0) target += r.target_met ? " ok" : " MISS";
         if (r.rounds.size() > 1 && r.target_met >= 0) {
             // Each round's figure judged: the ratio, or the value for a value target.
-            const bool by_ratio = r.info->target.kind == Target::kRatioAtMost;
+            const bool by_ratio = r.info->target.kind == Target::kRatioAtMost ||
+                                  r.info->target.kind == Target::kRatioPlusAtMost;
             target += " [";
             for (std::size_t i = 0; i < r.rounds.size(); ++i)
                 target += (i ? " " : "") + fmt("%.3g", by_ratio ? r.rounds[i].ratio : r.rounds[i].value);
