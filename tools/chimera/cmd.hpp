@@ -4,6 +4,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace chimera_cmd {
 
@@ -30,6 +31,8 @@ bool file_fit_to_use(const std::string& path);
 int cmd_status(const Options& o);
 int cmd_stop(const Options& o);
 int cmd_rm(const Options& o);
+// `chimera svar SUBCOMMAND ARGS...` (svar.cpp); `args` starts with the subcommand.
+int cmd_svar(const Options& o, const std::vector<const char*>& args);
 
 // Stop every RTPU of the attached backplane: SIGTERM, wait up to
 // timeout_s, SIGKILL the rest. Prints one line per RTPU unless quiet.

@@ -51,6 +51,8 @@ void usage(FILE* f) {
         "       chimera stop   [--backplane PATH] [--timeout S]\n"
         "       chimera rm     [--backplane PATH] [--force]\n"
         "       chimera path   [--backplane PATH]\n"
+        "       chimera svar   [--backplane PATH] list | get NAME | set NAME V... |\n"
+        "                      declare NAME TYPE RxC [UNIT]\n"
         "\n"
         "start   create the backplane PATH if absent (default $%s, else\n"
         "        backplane.bp in $XDG_RUNTIME_DIR/chimera or /dev/shm/chimera-<uid>,\n"
@@ -70,7 +72,11 @@ void usage(FILE* f) {
         "stop    SIGTERM every RTPU, wait up to S seconds (default 5), SIGKILL the rest\n"
         "rm      remove the backplane file and its RTPU logs; refuses while processes\n"
         "        are attached or when the file is not a backplane, unless --force\n"
-        "path    print the backplane path these commands use (for scripts)\n",
+        "path    print the backplane path these commands use (for scripts)\n"
+        "svar    the state-variable table: list every variable with its writer and\n"
+        "        value, get one, set a set-point (refused while a module writes it),\n"
+        "        or declare one (TYPE double, float, int32, uint32 or bool; shape\n"
+        "        RxC, 6x1 for a vector of 6)\n",
         CHM_BP_ENV);
 }
 
@@ -343,8 +349,9 @@ int main(int argc, char** argv) {
         usage(stdout);
         return 0;
     }
-    if (cmd != "start" && cmd != "status" && cmd != "stop" && cmd != "rm" && cmd != "path")
-        bad("unknown command \"" + cmd + "\" (start, status, stop, rm or path)");
+    if (cmd != "start" && cmd != "status" && cmd != "stop" && cmd != "rm" && cmd != "path" && cmd != "svar")
+        bad("unknown command \"" + cmd + "\" (start, status, stop, rm, path or svar)");
+    std::vector<const char*> words;  // svar's subcommand and its arguments
     Options o;
     StartPlan plan;
     std::vector<const char*> programs;
@@ -410,6 +417,8 @@ int main(int argc, char** argv) {
             plan.log_terminal = true;
         } else if (a == "--force" && cmd == "rm") {
             o.force = true;
+        } else if (cmd == "svar" && a.rfind("--", 0) != 0) {
+            words.push_back(argv[i]);  // "-1.5" is a value; options start with --
         } else {
             bad("chimera " + cmd + ": unknown option " + a);
         }
@@ -430,6 +439,7 @@ int main(int argc, char** argv) {
         return 0;
     }
     if (cmd == "status") return cmd_status(o);
+    if (cmd == "svar") return cmd_svar(o, words);
     if (cmd == "stop") return cmd_stop(o);
     return cmd_rm(o);
 }
