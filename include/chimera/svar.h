@@ -140,6 +140,27 @@ typedef struct chm_svar_set chm_svar_set_t;
 int chm_svar_set_create(const char* owner, const char* const* inputs, size_t n_in,
                         const char* const* outputs, size_t n_out, chm_svar_set_t** out);
 
+/* As chm_svar_set_create, but the set claims nothing yet: it can read,
+ * and writes only after chm_svar_set_claim. A module's set is opened when
+ * it is spawned and claims its outputs when it is switched on.
+ * Errors: those of chm_svar_set_create but -EBUSY. */
+int chm_svar_set_open(const char* owner, const char* const* inputs, size_t n_in,
+                      const char* const* outputs, size_t n_out, chm_svar_set_t** out);
+
+/* Claim every output of the set, all or none. A live writer whose owner
+ * name is one of `displace` (n_displace names; may be NULL/0) is displaced:
+ * the claim passes to this set (a switch hands a variable from the module
+ * going off to the one coming on; the old one may still finish the cycle
+ * it is in). Claiming again is a no-op. Errors: -EINVAL NULL set or
+ * names; -EBUSY an output has another live writer (chm_bp_last_error
+ * names the variable, that writer and this owner); -ETIMEDOUT; -ENOTCONN
+ * the set's attachment is gone. */
+int chm_svar_set_claim(chm_svar_set_t* set, const char* const* displace, size_t n_displace);
+
+/* Give up the set's claims (those still naming it); the set stays open
+ * for reading. Errors: -EINVAL NULL; -ETIMEDOUT. */
+int chm_svar_set_release(chm_svar_set_t* set);
+
 /* The local copy of `name` in the set (an input or an output), 16-byte
  * aligned, `bytes` long: read and write it directly. NULL when `name` is
  * not in the set (or set/name is NULL). */
@@ -152,8 +173,10 @@ void* chm_svar_set_local(const chm_svar_set_t* set, const char* name);
 int chm_svar_set_read(chm_svar_set_t* set);
 
 /* Copy-out: every output's local copy into the global table, each
- * variable whole. Never blocks, never waits for readers. Returns 0 or
- * -EINVAL NULL. */
+ * variable whole. Never blocks, never waits for readers. Returns 0;
+ * -EINVAL NULL; -EPERM the set holds no claim (opened and never claimed,
+ * or released; a set displaced by a switch still writes until released);
+ * -ENOTCONN its attachment is gone. */
 int chm_svar_set_write(chm_svar_set_t* set);
 
 /* Bytes the set copies per cycle: *in_bytes by chm_svar_set_read,

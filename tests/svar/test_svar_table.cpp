@@ -191,6 +191,39 @@ TEST_F(Svar, ASecondWriterIsRefusedNamingBoth) {
     EXPECT_EQ(chm_svar_set_destroy(grav), 0);
 }
 
+// A module's set: opened at spawn without a claim, claimed when it goes
+// on, handed over in a switch (displacing the module going off, which may
+// finish its cycle), released when it goes off.
+TEST_F(Svar, OpenedSetsClaimLaterAndHandOver) {
+    ASSERT_EQ(declare("tau", CHM_SVAR_DOUBLE, 2, 1), 0);
+    const char* tau[] = {"tau"};
+    chm_svar_set_t *pd = nullptr, *force = nullptr, *other = nullptr;
+    ASSERT_EQ(chm_svar_set_open("joint_pd", nullptr, 0, tau, 1, &pd), 0);
+    ASSERT_EQ(chm_svar_set_open("force_ctl", nullptr, 0, tau, 1, &force), 0) << "opening claims nothing";
+    ASSERT_EQ(chm_svar_set_open("other", nullptr, 0, tau, 1, &other), 0);
+    EXPECT_EQ(chm_svar_set_write(pd), -EPERM) << "no write without a claim";
+    ASSERT_EQ(chm_svar_set_claim(pd, nullptr, 0), 0) << err();
+    EXPECT_EQ(chm_svar_set_claim(pd, nullptr, 0), 0) << "claiming again is a no-op";
+    EXPECT_EQ(chm_svar_set_claim(force, nullptr, 0), -EBUSY);
+    const char* wrong[] = {"other"};
+    EXPECT_EQ(chm_svar_set_claim(force, wrong, 1), -EBUSY) << "only the named writer is displaced";
+    const char* off[] = {"joint_pd"};
+    ASSERT_EQ(chm_svar_set_claim(force, off, 1), 0) << err();
+    chm_svar_info_t i;
+    ASSERT_EQ(chm_svar_info("tau", &i), 0);
+    EXPECT_STREQ(i.writer, "force_ctl");
+    static_cast<double*>(chm_svar_set_local(pd, "tau"))[0] = 1;
+    EXPECT_EQ(chm_svar_set_write(pd), 0) << "the displaced writer finishes its cycle";
+    ASSERT_EQ(chm_svar_set_release(pd), 0);
+    ASSERT_EQ(chm_svar_info("tau", &i), 0);
+    EXPECT_STREQ(i.writer, "force_ctl") << "releasing a displaced claim leaves the new writer's";
+    ASSERT_EQ(chm_svar_set_release(force), 0);
+    ASSERT_EQ(chm_svar_info("tau", &i), 0);
+    EXPECT_EQ(i.has_writer, 0);
+    EXPECT_EQ(chm_svar_set_claim(other, nullptr, 0), 0);
+    for (auto* s : {pd, force, other}) EXPECT_EQ(chm_svar_set_destroy(s), 0);
+}
+
 TEST_F(Svar, CallsNeedAnAttachment) {
     ASSERT_EQ(declare("a", CHM_SVAR_DOUBLE, 1, 1), 0);
     const char* a[] = {"a"};

@@ -18,6 +18,7 @@
 #include <cstring>
 #include <new>
 
+#include "chimera/bp.h"
 #include "chimera/svar.h"
 #include "chimera/task.h"
 #include "ipc/err/report.hpp"
@@ -178,19 +179,29 @@ int resolve(chm_svar_set* s, const char* const* inputs, const char* const* outs)
     return r;
 }
 
-// Claim every output for `s`, all or none, under the table lock.
-int claim_outputs(chm_svar_set* s) {
-    if (s->n_out == 0) return 0;
+bool displaceable(const Entry* e, const char* const* displace, size_t n) {
+    char other[kNameLen];
+    std::memcpy(other, e->writer_name, kNameLen);
+    other[kNameLen - 1] = 0;
+    for (size_t i = 0; i < n; ++i)
+        if (displace[i] && std::strncmp(displace[i], other, kNameLen) == 0) return true;
+    return false;
+}
+
+// Claim every output for `s`, all or none, under the table lock; a live
+// writer named in `displace` passes its claim on.
+int claim_outputs(chm_svar_set* s, const char* const* displace, size_t n_displace) {
+    if (s->n_out == 0 || s->claims_held.load()) return 0;
     if (int r = lock(s->table)) return r;
     for (std::uint32_t k = 0; k < s->n_out; ++k) {
         const Entry* e = outputs(s)[k].e;
-        if (!claim_live(s->table, e)) continue;
+        if (!claim_live(s->table, e) || displaceable(e, displace, n_displace)) continue;
         char other[kNameLen];
         std::memcpy(other, e->writer_name, kNameLen);
         other[kNameLen - 1] = 0;
         unlock(s->table);
-        bp::set_error("chm_svar_set_create %s: state variable %s is written by %s already: one writer per variable",
-                      s->owner, outputs(s)[k].name, other);
+        bp::set_error("%s: state variable %s is written by %s already: one writer per variable", s->owner,
+                      outputs(s)[k].name, other);
         return -EBUSY;
     }
     bp::lock_mark_dirty(&s->table.hdr()->lock);
@@ -207,7 +218,7 @@ int claim_outputs(chm_svar_set* s) {
 }
 
 int create_impl(const char* owner, const char* const* inputs, size_t n_in, const char* const* outs, size_t n_out,
-                chm_svar_set_t** out) {
+                chm_svar_set_t** out, bool claim) {
     if (!out || !owner || !owner[0] || (n_in && !inputs) || (n_out && !outs))
         return bp::set_error("chm_svar_set_create: NULL or empty owner, NULL out or NULL name list"), -EINVAL;
     if (std::strlen(owner) > CHM_SVAR_NAME_MAX)
@@ -234,7 +245,12 @@ int create_impl(const char* owner, const char* const* inputs, size_t n_in, const
         r = resolve(s, inputs, outs);
     }
     if (r == 0 && !enlist(s)) r = -ENOMEM, bp::set_error("chm_svar_set_create %s: %u sets live in this process", owner, kMaxSets);
-    if (r == 0 && (r = claim_outputs(s))) delist(s);
+    if (r == 0 && claim && (r = claim_outputs(s, nullptr, 0))) {
+        delist(s);
+        char why[400];
+        std::snprintf(why, sizeof why, "%s", chm_bp_last_error());
+        bp::set_error("chm_svar_set_create %s", why);
+    }
     if (r) {
         free_set(s);
         return r;
@@ -269,7 +285,26 @@ extern "C" {
 
 int chm_svar_set_create(const char* owner, const char* const* inputs, size_t n_in, const char* const* outputs,
                         size_t n_out, chm_svar_set_t** out) {
-    return chm::ipc::leave(create_impl(owner, inputs, n_in, outputs, n_out, out), "chm_svar_set_create");
+    return chm::ipc::leave(create_impl(owner, inputs, n_in, outputs, n_out, out, true), "chm_svar_set_create");
+}
+
+int chm_svar_set_open(const char* owner, const char* const* inputs, size_t n_in, const char* const* outputs,
+                      size_t n_out, chm_svar_set_t** out) {
+    return chm::ipc::leave(create_impl(owner, inputs, n_in, outputs, n_out, out, false), "chm_svar_set_open");
+}
+
+int chm_svar_set_claim(chm_svar_set_t* set, const char* const* displace, size_t n_displace) {
+    int r;
+    if (!set || (n_displace && !displace)) r = (bp::set_error("chm_svar_set_claim: NULL set or names"), -EINVAL);
+    else if (!same_attachment(set))
+        r = (bp::set_error("chm_svar_set_claim %s: its backplane attachment is gone", set->owner), -ENOTCONN);
+    else r = claim_outputs(set, displace, n_displace);
+    return chm::ipc::leave(r, "chm_svar_set_claim");
+}
+
+int chm_svar_set_release(chm_svar_set_t* set) {
+    if (!set) return chm::ipc::leave((bp::set_error("chm_svar_set_release: NULL set"), -EINVAL), "chm_svar_set_release");
+    return chm::ipc::leave(release_claims(set), "chm_svar_set_release");
 }
 
 void* chm_svar_set_local(const chm_svar_set_t* set, const char* name) {
@@ -293,6 +328,10 @@ int chm_svar_set_write(chm_svar_set_t* set) {
     if (!same_attachment(set))
         return chm::ipc::leave((bp::set_error("chm_svar_set_write %s: its backplane attachment is gone", set->owner),
                                 -ENOTCONN),
+                               "chm_svar_set_write");
+    if (set->n_out && !set->claims_held.load(std::memory_order_relaxed))
+        return chm::ipc::leave((bp::set_error("chm_svar_set_write %s: the set holds no claim on its outputs", set->owner),
+                                -EPERM),
                                "chm_svar_set_write");
     for (std::uint32_t k = 0; k < set->n_out; ++k) {
         SetVar& v = set->vars[set->n_in + k];
