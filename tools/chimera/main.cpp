@@ -310,7 +310,8 @@ int cmd_start(const Options& o, const StartPlan& p) {
         chm_bp_leave();
         return 0;
     }
-    // All or nothing: stop what we started, remove what we created.
+    // All or nothing: stop what we started, remove what we created. These
+    // are our own children (pids from fork, reaped here), not table pids.
     say("%s", failure.c_str());
     for (pid_t pid : pids)
         if (pid > 0) kill(pid, SIGTERM);
