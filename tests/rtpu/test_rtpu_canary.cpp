@@ -190,3 +190,44 @@ TEST_F(CanaryTest, NoSignalReachesAProcessTheTableNamesFalsely) {
 }
 
 }  // namespace
+
+// Item 5, least privilege: an RTPU gives up its capabilities once set up
+// (keeping only CAP_IPC_LOCK while its memory stays locked), and chimera
+// start run as root says root is not needed. As root here; without root
+// an RTPU starts with no capability to drop and there is nothing to see.
+namespace {
+
+std::uint64_t caps(pid_t pid, const char* key) {
+    const std::string st = read_file("/proc/" + std::to_string(pid) + "/status");
+    const std::size_t at = st.find(key);
+    return at == std::string::npos ? ~0ull : std::stoull(st.substr(at + std::strlen(key)), nullptr, 16);
+}
+
+TEST_F(CanaryTest, AnRtpuDropsItsCapabilitiesAndRootIsNotNeeded) {
+    if (geteuid() != 0) GTEST_SKIP() << "not root: an RTPU has no capability to drop";
+    create();
+    const pid_t p1 = start_rtpu(1);
+    const pid_t p2 = start_rtpu(2, {"--lock-memory"});
+    ASSERT_TRUE(wait_serving(1, p1)) << read_file(err_of(1));
+    ASSERT_TRUE(wait_serving(2, p2)) << read_file(err_of(2));
+    EXPECT_EQ(caps(p1, "CapEff:"), 0u);
+    EXPECT_EQ(caps(p1, "CapPrm:"), 0u);
+    EXPECT_EQ(caps(p2, "CapEff:"), 1ull << 14) << "CAP_IPC_LOCK only";
+    EXPECT_EQ(caps(p2, "CapPrm:"), 1ull << 14);
+    // They still wake each other: identity checks need no privilege.
+    chm_rtpu_info_t info;
+    EXPECT_EQ(chm_rtpu_ping(1, &info), 0) << chm_bp_last_error();
+    EXPECT_EQ(chm_rtpu_ping(2, &info), 0) << chm_bp_last_error();
+
+    chm_bp_leave();
+    const std::string other = dir_ + "/root.bp";
+    Outcome r = run({CHIMERA_BIN, "start", "--backplane", other, "--rtpus", "1"});
+    EXPECT_EQ(r.status, 0) << r.out << r.err;
+    EXPECT_NE(r.err.find("running as root is not needed"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("CAP_SYS_NICE"), std::string::npos) << r.err;
+    r = run({CHIMERA_BIN, "stop", "--backplane", other});
+    EXPECT_EQ(r.status, 0) << r.out << r.err;
+    r = run({CHIMERA_BIN, "rm", "--backplane", other});
+}
+
+}  // namespace

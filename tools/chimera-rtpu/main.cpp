@@ -272,6 +272,11 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "chimera-rtpu: RTPU %d: %s\n", o.rtpu, why.c_str());
         return 1;
     }
+    // Set up: nothing below needs a capability (SECURITY.md, least privilege).
+    if (const std::string why = chimera_rtpu::drop_privileges(o.realtime); !why.empty()) {
+        std::fprintf(stderr, "chimera-rtpu: RTPU %d: %s\n", o.rtpu, why.c_str());
+        return 1;
+    }
     if (int r = chm_bp_join(path, o.rtpu, o.name)) {
         const char* why = chm_bp_last_error();
         if (std::strstr(why, std::strerror(-r)))
