@@ -7,7 +7,9 @@
 // registry names and does a non-blocking operation on each (shm attach and
 // a read of its first and last byte, try-P and V, try-send and
 // try-receive). Anything may fail with a status; nothing may crash, hang
-// or trip a sanitizer.
+// or trip a sanitizer. Every slot that is not free names a live canary
+// process (canary.hpp), and a patch value kCanaryWord stands for its pid:
+// no input may get it signalled.
 //
 // Patches rather than raw bytes: the image is ~50 KiB, and a word store
 // anywhere in it is what a stray write or a damaged file looks like.
@@ -18,22 +20,25 @@
 #include "chimera/rsem.h"
 #include "chimera/shm.h"
 #include "ipc/backplane/backplane.hpp"
+#include "canary.hpp"
 #include "seed_image.hpp"
 
 namespace {
 
 chm::fuzz::SeedImage g_seed;
+chm::fuzz::Canary g_canary;
+// A patch value that means "the canary's pid", so inputs can plant it in
+// any field (waiter records, lock owners, express-mail records).
+constexpr std::uint32_t kCanaryWord = 0xCA4A21E5;
 std::string g_dir, g_path;
 int g_fd = -1;
 
 void open_objects() {
     using namespace chm::bp;
     Attachment* a = current();
-    // Grants ring a waiter's RTPU with a directed signal to the pid and
-    // thread id in its table entry; in a patched image those could name
-    // any process of this user. Cleared, so a grant wakes the futex only.
-    for (std::uint32_t s = 0; s < a->slots(); ++s)
-        if (s != a->slot) a->rtpu(s)->tid.store(0);
+    // Grants ring a waiter's RTPU with a directed signal; every other
+    // slot names the canary (plant), which must survive (checked after
+    // each input).
     for (std::uint32_t i = 0; i < a->geo().registry_capacity; ++i) {
         const RegistryEntry* e = a->entry(i);
         if (e->state.load() != std::uint32_t(EntryState::Live)) continue;
@@ -87,6 +92,7 @@ extern "C" int LLVMFuzzerInitialize(int*, char***) {
     g_seed = chm::fuzz::make_seed_image((g_dir + "/seed.bp").c_str());
     ::unlink((g_dir + "/seed.bp").c_str());
     g_path = g_dir + "/image.bp";
+    g_canary = chm::fuzz::start_canary();
     std::atexit([] {  // a clean end leaves nothing behind (a crash leaves the image to look at)
         ::unlink(g_path.c_str());
         ::rmdir(g_dir.c_str());
@@ -106,8 +112,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         std::uint32_t off, val;
         std::memcpy(&off, data + k, 4);
         std::memcpy(&val, data + k + 4, 4);
+        if (val == kCanaryWord) val = std::uint32_t(g_canary.pid);
         std::memcpy(&img[std::size_t(off % words) * 4], &val, 4);
     }
+    chm::fuzz::plant(img.data(), g_seed.layout, g_canary);
     if (::pwrite(g_fd, img.data(), img.size(), 0) != ssize_t(img.size())) std::abort();  // always the seed's size
 
     // The checker, read-only, as chimera-bpcheck runs it.
@@ -125,5 +133,6 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         open_objects();
         chm_bp_leave();
     }
+    chm::fuzz::alive_or_abort(g_canary, "this input");
     return 0;
 }

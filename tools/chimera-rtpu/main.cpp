@@ -272,14 +272,23 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "chimera-rtpu: RTPU %d: %s\n", o.rtpu, why.c_str());
         return 1;
     }
-    if (int r = chm_bp_join(path, o.rtpu, o.name)) {
+    auto cannot_join = [&](int r) {
         const char* why = chm_bp_last_error();
         if (std::strstr(why, std::strerror(-r)))
             std::fprintf(stderr, "chimera-rtpu: cannot join as RTPU %d: %s\n", o.rtpu, why);
         else
             std::fprintf(stderr, "chimera-rtpu: cannot join as RTPU %d: %s (%s)\n", o.rtpu, why, std::strerror(-r));
         return 1;
+    };
+    // Whether the file may be attached, while root can still open any file
+    // to say why not (owner, mode, fix) rather than "permission denied".
+    if (int r = chm_bp_check_file(path); r != 0 && r != -ENOENT) return cannot_join(r);
+    // Set up: nothing below needs a capability (SECURITY.md, least privilege).
+    if (const std::string why = chimera_rtpu::drop_privileges(o.realtime); !why.empty()) {
+        std::fprintf(stderr, "chimera-rtpu: RTPU %d: %s\n", o.rtpu, why.c_str());
+        return 1;
     }
+    if (int r = chm_bp_join(path, o.rtpu, o.name)) return cannot_join(r);
     chm_kernel_config_t cfg;
     chm_kernel_config_init(&cfg);
     cfg.policy = o.policy;

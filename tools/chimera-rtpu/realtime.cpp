@@ -4,8 +4,12 @@
 #include <cstdlib>
 #include <cstring>
 
+#include <linux/capability.h>
 #include <sched.h>
 #include <sys/mman.h>
+#include <sys/prctl.h>
+#include <sys/syscall.h>
+#include <unistd.h>
 
 #include "../parse_num.hpp"
 
@@ -57,6 +61,29 @@ std::string apply(const HostRealtime& rt) {
             return os_error("--rt-priority " + std::to_string(rt.fifo_priority) + ": sched_setscheduler(SCHED_FIFO)",
                             errno, errno == EPERM ? " (needs CAP_SYS_NICE or an rtprio limit: ulimit -r)" : "");
     }
+    return "";
+}
+
+std::string drop_privileges(const HostRealtime& rt) {
+    // capget/capset directly: libcap is not needed for this.
+    __user_cap_header_struct hdr{_LINUX_CAPABILITY_VERSION_3, 0};
+    __user_cap_data_struct data[_LINUX_CAPABILITY_U32S_3] = {};
+    if (::syscall(SYS_capget, &hdr, data) != 0) return os_error("capget", errno);
+    const unsigned keep = CAP_IPC_LOCK;
+    const bool keep_lock = rt.lock_memory && (data[keep / 32].permitted & (1u << (keep % 32)));
+    bool any = false;
+    for (auto& d : data) {
+        any = any || d.permitted || d.effective || d.inheritable;
+        d.permitted = d.effective = d.inheritable = 0;
+    }
+    (void)::prctl(PR_CAP_AMBIENT, PR_CAP_AMBIENT_CLEAR_ALL, 0, 0, 0);  // EINVAL before Linux 4.3: none then
+    if (!any) return "";
+    if (keep_lock) {
+        data[keep / 32].permitted = 1u << (keep % 32);
+        data[keep / 32].effective = 1u << (keep % 32);
+    }
+    if (::syscall(SYS_capset, &hdr, data) != 0) return os_error("capset (dropping capabilities)", errno);
+    (void)::prctl(PR_SET_DUMPABLE, 1, 0, 0, 0);
     return "";
 }
 

@@ -22,4 +22,14 @@ std::string parse_cpu(const char* s, int* out);
 // option that fails leaves the ones before it in force; the caller exits.
 std::string apply(const HostRealtime& rt);
 
+// After apply, before any thread exists (capabilities are per thread):
+// give up every capability, keeping only CAP_IPC_LOCK while memory stays
+// locked (MCL_FUTURE: later mappings, e.g. a loaded program, are locked
+// too and would otherwise count against RLIMIT_MEMLOCK). Ambient
+// capabilities go too, and the process is made dumpable again (a binary
+// with file capabilities starts non-dumpable, which would hide its
+// /proc/PID/maps from the peers that check its identity before a wake).
+// "" when done, else what the OS said.
+std::string drop_privileges(const HostRealtime& rt);
+
 }  // namespace chimera_rtpu

@@ -36,7 +36,8 @@ int cmd_svar(const Options& o, const std::vector<const char*>& args);
 
 // Stop every RTPU of the attached backplane: SIGTERM, wait up to
 // timeout_s, SIGKILL the rest. Prints one line per RTPU unless quiet.
-// Returns the number that had to be killed.
-int stop_attached(double timeout_s, bool quiet);
+// Returns the number that had to be killed; *refused_out (when given):
+// slots whose pid failed the identity check, reported and not signalled.
+int stop_attached(double timeout_s, bool quiet, int* refused_out = nullptr);
 
 }  // namespace chimera_cmd

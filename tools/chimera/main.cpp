@@ -316,7 +316,8 @@ int cmd_start(const Options& o, const StartPlan& p) {
         chm_bp_leave();
         return 0;
     }
-    // All or nothing: stop what we started, remove what we created.
+    // All or nothing: stop what we started, remove what we created. These
+    // are our own children (pids from fork, reaped here), not table pids.
     say("%s", failure.c_str());
     for (pid_t pid : pids)
         if (pid > 0) kill(pid, SIGTERM);
@@ -431,6 +432,13 @@ int main(int argc, char** argv) {
         o.backplane = path;
     }
     if (cmd == "start") {
+        // Root is never a reason in itself (SECURITY.md): say what suffices.
+        if (geteuid() == 0 && !std::getenv("CHIMERA_AS_ROOT"))
+            std::fprintf(stderr,
+                         "chimera: warning: running as root is not needed: real-time priority needs only "
+                         "CAP_SYS_NICE or an rtprio limit, --lock-memory CAP_IPC_LOCK or a memlock limit "
+                         "(README, \"Privileges\"); RTPUs drop every capability once set up. "
+                         "Set CHIMERA_AS_ROOT=1 to silence this when root is deliberate.\n");
         for (const char* spec : programs) add_program(&plan, spec);
         return cmd_start(o, plan);
     }

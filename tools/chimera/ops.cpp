@@ -172,21 +172,31 @@ int cmd_status(const Options& o) {
     return 0;
 }
 
-int stop_attached(double timeout_s, bool quiet) {
+int stop_attached(double timeout_s, bool quiet, int* refused_out) {
     chm_bp_status_t st;
     chm_bp_status(&st);
     struct Victim {
         int slot, pid;
-        std::uint32_t gen;
+        std::uint32_t gen, status;  // status: the word the signals are checked against
         bool done;
         std::uint64_t start;  // the process's start time: pid reuse is not "alive"
     };
+    // Signals go only to processes the kernel confirms are this
+    // backplane's members (bp::signal_member); a refused slot is reported
+    // and left alone, never killed.
     std::vector<Victim> v;
+    int refused = 0;
     for (std::uint32_t s = 0; s < st.slots; ++s)
         if (is_rtpu(st.slot[s]) && st.slot[s].pid > 0) {
-            v.push_back({int(s), st.slot[s].pid, st.slot[s].generation, false,
+            const std::uint32_t word = chm::bp::current()->rtpu(s)->status.load();
+            const int r = chm::bp::signal_member(s, chm::bp::MemberTarget::Process, SIGTERM, word);
+            if (r == -EPERM) {
+                ++refused;
+                if (!quiet) std::printf("RTPU %u: not stopped: %s\n", s, chm_bp_last_error());
+                continue;
+            }
+            v.push_back({int(s), st.slot[s].pid, st.slot[s].generation, word, false,
                          chm::bp::proc_start_time(st.slot[s].pid)});
-            kill(st.slot[s].pid, SIGTERM);
         }
     // Gone: the slot no longer holds that generation in a live state.
     auto gone = [](const Victim& x) {
@@ -217,7 +227,10 @@ int stop_attached(double timeout_s, bool quiet) {
             if (!quiet) std::printf("RTPU %d (pid %d): stopped\n", x.slot, x.pid);
             continue;
         }
-        kill(x.pid, SIGKILL);
+        if (chm::bp::signal_member(std::uint32_t(x.slot), chm::bp::MemberTarget::Process, SIGKILL, x.status) == -EPERM) {
+            if (!quiet) std::printf("RTPU %d: not killed: %s\n", x.slot, chm_bp_last_error());
+            continue;
+        }
         ++killed;
         // Our monitor thread recovers the slot once the process is gone.
         const std::uint64_t kend = mono_ms() + 3000;
@@ -225,14 +238,16 @@ int stop_attached(double timeout_s, bool quiet) {
         if (!quiet)
             std::printf("RTPU %d (pid %d): killed (did not stop within %.1f s)\n", x.slot, x.pid, timeout_s);
     }
-    if (!quiet && v.empty()) std::printf("no RTPU running\n");
+    if (!quiet && v.empty() && !refused) std::printf("no RTPU running\n");
     std::fflush(stdout);
+    if (refused_out) *refused_out = refused;
     return killed;
 }
 
 int cmd_stop(const Options& o) {
     if (attach(o)) return 1;
-    stop_attached(o.timeout_s < 0 ? 5.0 : o.timeout_s, false);
+    int refused = 0;
+    stop_attached(o.timeout_s < 0 ? 5.0 : o.timeout_s, false, &refused);
     chm_bp_status_t st;
     chm_bp_status(&st);
     int hosts = 0;
@@ -240,7 +255,7 @@ int cmd_stop(const Options& o) {
         if (int(s) != st.self && st.slot[s].kind == CHM_BP_KIND_HOST && st.slot[s].state == CHM_BP_RUNNING) ++hosts;
     if (hosts) std::printf("%d host program%s still attached\n", hosts, hosts == 1 ? "" : "s");
     chm_bp_leave();
-    return 0;
+    return refused ? 1 : 0;
 }
 
 int cmd_rm(const Options& o) {

@@ -52,6 +52,7 @@ void after_fork_parent() {
 void after_fork_child() {
     g_monitor_paused = false;
     proc_after_fork_child();
+    member_forget();
     if (!g_attached.load(R)) return;
     monitor_forget_after_fork();
     unmap(&g_att);
@@ -272,6 +273,7 @@ int chm_bp_leave(void) {
     e->idle.store(0, R);
     e->status.store(make_status(a.gen, SlotState::Free), std::memory_order_release);
     g_attached.store(false, std::memory_order_release);
+    member_forget();  // verdicts about this file's members
     unmap(&a);
     ::close(a.fd);
     std::free(a.local_refs);

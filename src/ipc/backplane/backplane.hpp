@@ -190,6 +190,23 @@ std::uint32_t task_word();
 // In a forked child (the forking thread's cached thread id is stale).
 void proc_after_fork_child();
 
+// ------------------------------------------------------ signalling members
+
+// member.cpp: the only way to signal another process of the backplane.
+// The slot's pid (and thread id) are checked with the kernel first: alive
+// with the recorded start time, a user the backplane trusts, this file
+// mapped; a thread of it that catches the wake signal. A claim that fails
+// is reported (last error and stderr: slot, field, value) and not
+// signalled. Thread verdicts are cached per slot until its status, pid or
+// tid word changes, so a wake-up pays nothing after the first.
+enum class MemberTarget { KernelThread, Process };
+// `status`: for Process, the slot's status the caller saw (-ESRCH when it
+// changed since: the member left). 0, -EPERM (refused), -ESRCH (no
+// process, or no kernel thread published), -ENOTCONN, -EINVAL.
+int signal_member(std::uint32_t slot, MemberTarget target, int sig, std::uint32_t status = 0);
+// Drop every cached verdict (attach, leave, a forked child).
+void member_forget();
+
 // --------------------------------------------------------- the robust lock
 
 // Does `token` name a live holder? Cheap: the RTPU table says so (slot in

@@ -2,6 +2,7 @@
 #include "ipc/wake/wake.hpp"
 
 #include <cerrno>
+#include <cstdint>
 #include <ctime>
 #include <linux/futex.h>
 #include <sys/syscall.h>
@@ -24,6 +25,13 @@ port::Doorbell doorbell_of(bp::RtpuEntry* e) {
 }
 
 bool g_bound = false;
+
+// A peer's kernel thread, through the identity check (bp::signal_member).
+int interrupt_slot(void* ctx) {
+    const auto slot = std::uint32_t(reinterpret_cast<std::uintptr_t>(ctx));
+    return bp::signal_member(slot, bp::MemberTarget::KernelThread, port::timer_signal());
+}
+void* slot_ctx(std::uint32_t slot) { return reinterpret_cast<void*>(std::uintptr_t(slot)); }
 
 void grant_vector(int, void*) { kernel::remote_scan_locked(); }
 
@@ -62,10 +70,18 @@ int wake_ring(std::uint32_t slot, int vector) {
     if (!a) return -ENOTCONN;
     if (slot >= a->slots() || vector < 0 || vector >= CHM_IRQ_LINE_FIRST) return -EINVAL;
     bp::RtpuEntry* e = a->rtpu(slot);
-    const int pid = int(e->pid.load());
-    if (pid <= 0) return -ESRCH;
-    port::doorbell_ring(doorbell_of(e), 1u << vector, pid, int(e->tid.load()));
-    return 0;
+    if (int(e->pid.load()) <= 0) return -ESRCH;
+    // A refusal (the slot's pid or thread id is not the member's) is
+    // reported by the check and returned, so a sender need not wait.
+    struct Ctx {
+        std::uint32_t slot;
+        int result;
+    } c{slot, 0};
+    port::doorbell_ring(doorbell_of(e), 1u << vector, [](void* p) {
+        Ctx& c = *static_cast<Ctx*>(p);
+        return c.result = interrupt_slot(slot_ctx(c.slot));
+    }, &c);
+    return c.result == -EPERM ? -EPERM : 0;
 }
 
 int wait_word(std::uint32_t* word, std::int64_t timeout_ns) {
@@ -121,8 +137,8 @@ void wake_granted(std::uint32_t* word, std::uint32_t slot, WaiterId who) {
         if (slot == a->slot && port::on_kernel_thread()) {
             kernel::remote_scan();  // our own RTPU, from one of its tasks
         } else {
-            port::doorbell_ring(doorbell_of(e), 1u << kernel::kGrantVector, int(e->pid.load()),
-                                int(e->tid.load()), port::RingFor{who.urgency, who.task});
+            port::doorbell_ring(doorbell_of(e), 1u << kernel::kGrantVector, interrupt_slot, slot_ctx(slot),
+                                port::RingFor{who.urgency, who.task});
         }
         return;
     }

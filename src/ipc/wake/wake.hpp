@@ -24,7 +24,9 @@ int wake_bind_kernel();
 void wake_unbind_kernel();
 
 // Raise mailbox `vector` on the RTPU in `slot`. Errors: -EINVAL bad slot
-// or vector; -ENOTCONN not attached; -ESRCH the slot runs no process.
+// or vector; -ENOTCONN not attached; -ESRCH the slot runs no process;
+// -EPERM the slot's pid or thread id failed the identity check (reported,
+// not signalled: bp::signal_member).
 int wake_ring(std::uint32_t slot, int vector);
 
 // What a waiter stores into its word when it writes its record (before a

@@ -218,7 +218,12 @@ int call(int rtpu, Kind kind, const void* req, std::uint32_t len, void* reply, s
     std::uint32_t expect = make_state(seq, kWriting);
     if (!r->state.compare_exchange_strong(expect, make_state(seq, kPosted), Rel, R))
         return set_error("RTPU %d: request reclaimed as stale while being written", rtpu), -ETIMEDOUT;
-    ipc::wake_ring(std::uint32_t(rtpu), ipc::kVecExpressMail);
+    if (ipc::wake_ring(std::uint32_t(rtpu), ipc::kVecExpressMail) == -EPERM) {
+        // The slot's pid or thread id is not its member's (reported, last
+        // error set): nobody we may wake would serve it.
+        if (abandon(r, seq)) return take_reply(r, seq, reply, cap, reply_len);
+        return -EPERM;
+    }
 
     // 3. Wait for the reply, in slices, watching the target.
     auto* word = reinterpret_cast<std::uint32_t*>(&r->reply);

@@ -145,10 +145,10 @@ int chm_irq_raise(int vector) {
         return 0;
     }
     if (vector < CHM_IRQ_LINE_FIRST) {
-        port::doorbell_ring(port::doorbell(), 1u << vector, port::kernel_pid(), port::kernel_tid());
+        port::doorbell_ring(port::doorbell(), 1u << vector, port::interrupt_own_kernel, nullptr);
     } else {
         __atomic_fetch_or(&g_lines_raised, 1u << (vector - CHM_IRQ_LINE_FIRST), __ATOMIC_SEQ_CST);
-        port::doorbell_ring(port::doorbell(), 0, port::kernel_pid(), port::kernel_tid());
+        port::doorbell_ring(port::doorbell(), 0, port::interrupt_own_kernel, nullptr);
     }
     return 0;
 }

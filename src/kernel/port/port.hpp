@@ -334,11 +334,17 @@ const Doorbell& doorbell();
 std::uint32_t doorbell_take();
 // True when vectors are pending (not taken). Any context on the kernel thread.
 bool doorbell_raised();
-// Raise `bits` on the RTPU behind `db` whose kernel thread is `tid` of
-// process `pid`, and wake it as its state requires (futex wake, directed
-// timer signal, or nothing while it polls). Any thread or process; async-
-// signal-safe.
-void doorbell_ring(const Doorbell& db, std::uint32_t bits, int pid, int tid, RingFor why = kRingInterrupt);
+// Sends the directed timer signal to the kernel thread behind a doorbell;
+// 0 when sent. A peer's goes through the backplane's identity check
+// (ipc/backplane/member.cpp), never to a pid taken from shared memory.
+using Interrupt = int (*)(void* ctx);
+// This process's own kernel thread (ctx unused).
+int interrupt_own_kernel(void* ctx);
+// Raise `bits` on the RTPU behind `db` and wake it as its state requires
+// (futex wake, `interrupt(ctx)`, or nothing while it polls). Any thread
+// or process; async-signal-safe when `interrupt` is.
+void doorbell_ring(const Doorbell& db, std::uint32_t bits, Interrupt interrupt, void* ctx,
+                   RingFor why = kRingInterrupt);
 // Publish what this RTPU runs now (the kernel's switch and scheduler, mask
 // held): a no-op unless the doorbell has running/urgency words. When the
 // published state may let a skipped ring matter (another task, or a lower

@@ -5,6 +5,7 @@
 #include "port.hpp"
 #include "posix_internal.hpp"
 
+#include <cerrno>
 #include <csignal>
 #include <ctime>
 #include <linux/futex.h>
@@ -83,7 +84,13 @@ std::uint32_t doorbell_take() {
     return __atomic_exchange_n(g_db.pending, 0, __ATOMIC_SEQ_CST);
 }
 
-void doorbell_ring(const Doorbell& db, std::uint32_t bits, int pid, int tid, RingFor why) {
+int interrupt_own_kernel(void*) {
+    // Our own kernel thread, named by process memory (never by a file).
+    if (g_kernel_tid <= 0) return -ESRCH;
+    return syscall(SYS_tgkill, getpid(), g_kernel_tid, timer_signal()) == 0 ? 0 : -errno;
+}
+
+void doorbell_ring(const Doorbell& db, std::uint32_t bits, Interrupt interrupt, void* ctx, RingFor why) {
     if (bits) {
         __atomic_fetch_or(db.pending, bits, __ATOMIC_SEQ_CST);
         __atomic_fetch_add(&g_rings_sent, 1, __ATOMIC_RELAXED);
@@ -107,10 +114,7 @@ void doorbell_ring(const Doorbell& db, std::uint32_t bits, int pid, int tid, Rin
         }
         [[fallthrough]];
     default:  // asleep in ppoll, or running something less urgent: interrupt it
-        if (tid > 0) {
-            syscall(SYS_tgkill, pid, tid, timer_signal());
-            __atomic_fetch_add(&g_signals_sent, 1, __ATOMIC_RELAXED);
-        }
+        if (interrupt(ctx) == 0) __atomic_fetch_add(&g_signals_sent, 1, __ATOMIC_RELAXED);
         break;
     }
 }
@@ -173,6 +177,6 @@ int idle_wait_fds_locked(pollfd* fds, unsigned long nfds, std::uint64_t until_ns
     return ready;
 }
 
-void idle_wake() { doorbell_ring(g_db, 0, getpid(), g_kernel_tid); }
+void idle_wake() { doorbell_ring(g_db, 0, interrupt_own_kernel, nullptr); }
 
 }  // namespace chm::port
