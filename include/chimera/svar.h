@@ -151,7 +151,8 @@ int chm_svar_set_open(const char* owner, const char* const* inputs, size_t n_in,
  * name is one of `displace` (n_displace names; may be NULL/0) is displaced:
  * the claim passes to this set (a switch hands a variable from the module
  * going off to the one coming on; the old one may still finish the cycle
- * it is in). Claiming again is a no-op. Errors: -EINVAL NULL set or
+ * it is in). Claiming again takes back any output another set took
+ * (displacing only the names given); outputs it holds stay as they are. Errors: -EINVAL NULL set or
  * names; -EBUSY an output has another live writer (chm_bp_last_error
  * names the variable, that writer and this owner); -ETIMEDOUT; -ENOTCONN
  * the set's attachment is gone. */

@@ -191,11 +191,14 @@ bool displaceable(const Entry* e, const char* const* displace, size_t n) {
 // Claim every output for `s`, all or none, under the table lock; a live
 // writer named in `displace` passes its claim on.
 int claim_outputs(chm_svar_set* s, const char* const* displace, size_t n_displace) {
-    if (s->n_out == 0 || s->claims_held.load()) return 0;
+    if (s->n_out == 0) return 0;
+    auto mine = [s](const Entry* e) {
+        return e->writer_token.load(Acq) == s->a->token && e->writer_id.load(Acq) == s->id;
+    };
     if (int r = lock(s->table)) return r;
     for (std::uint32_t k = 0; k < s->n_out; ++k) {
         const Entry* e = outputs(s)[k].e;
-        if (!claim_live(s->table, e) || displaceable(e, displace, n_displace)) continue;
+        if (mine(e) || !claim_live(s->table, e) || displaceable(e, displace, n_displace)) continue;
         char other[kNameLen];
         std::memcpy(other, e->writer_name, kNameLen);
         other[kNameLen - 1] = 0;
@@ -207,6 +210,7 @@ int claim_outputs(chm_svar_set* s, const char* const* displace, size_t n_displac
     bp::lock_mark_dirty(&s->table.hdr()->lock);
     for (std::uint32_t k = 0; k < s->n_out; ++k) {
         Entry* e = outputs(s)[k].e;
+        if (mine(e)) continue;  // claiming again re-asserts only what another took
         std::memcpy(e->writer_name, s->owner, kNameLen);  // the name before the token: info reads both
         e->writer_id.store(s->id, Rel);
         e->writer_token.store(s->a->token, Rel);

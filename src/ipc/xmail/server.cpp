@@ -15,6 +15,7 @@
 #include "chimera/mem.h"
 #include "chimera/program.h"
 #include "chimera/sem.h"
+#include "ipc/servo/servo.hpp"
 #include "chimera/usig.h"
 #include "ipc/wake/wake.hpp"
 #include "ipc/xmail/xmail.hpp"
@@ -162,9 +163,11 @@ int do_tasks(const char* req, std::uint32_t len, char* rep, std::uint32_t* n) {
     return 0;
 }
 
-int dispatch(Kind kind, const char* req, std::uint32_t len, char* rep, std::uint32_t* n, std::uint32_t from) {
+int dispatch(Kind kind, const char* req, std::uint32_t len, char* rep, std::uint32_t* n, std::uint32_t owner) {
     *n = 0;
+    const std::uint32_t from = bp::token_slot(owner);
     switch (kind) {
+    case kServo: return servo::serve(req, len, rep, g_s.room, n, owner);
     case kPing: return do_ping(rep, n);
     case kSpawn: return do_spawn(req, len, rep, n, from);
     case kSignal:
@@ -193,7 +196,7 @@ void serve(Record* r, std::uint32_t seq) {
     const Kind kind = Kind(r->kind);
     std::memcpy(g_s.req, payload_of(r), len);
     std::uint32_t n = 0;
-    const int status = dispatch(kind, g_s.req, len, g_s.rep, &n, bp::token_slot(r->owner.load(R)));
+    const int status = dispatch(kind, g_s.req, len, g_s.rep, &n, r->owner.load(R));
     r->status = status;
     r->len = n;
     if (n) std::memcpy(payload_of(r), g_s.rep, n);

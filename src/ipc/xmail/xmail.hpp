@@ -56,7 +56,7 @@ inline constexpr std::uint32_t kRecordMin = 128;   // CHM_RTPU_RECORD_MIN
 inline constexpr std::uint32_t kStaleWriteMs = 2000;
 
 enum Kind : std::uint32_t {
-    kPing = 1, kSpawn, kSignal, kTasks, kFind, kDestroy, kStop, kKindEnd
+    kPing = 1, kSpawn, kSignal, kTasks, kFind, kDestroy, kStop, kServo, kKindEnd
 };
 
 // ------------------------------------------------------------ wire formats

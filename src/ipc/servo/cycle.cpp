@@ -1,0 +1,254 @@
+// A module's cycles and its part in a switch, on its RTPU: the periodic
+// task that exists while the module is ON (copy-in, cycle, copy-out at
+// every release on the shared grid), and prepare / commit / cancel.
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+
+#include "chimera/bp.h"
+#include "chimera/err.h"
+#include "chimera/kernel.h"
+#include "ipc/servo/host.hpp"
+
+namespace chm::servo {
+
+namespace {
+
+constexpr std::uint64_t kStopWaitNs = 2'000'000'000ull;
+
+chm_err_action_t record_cycle_error(const chm_err_info_t* i, void* arg) {
+    auto* m = static_cast<chm_module*>(arg);
+    set_last_error(m, "cycle: %s error %d (%s)%s%s%s%s", i->module_name ? i->module_name : "?", i->code,
+                   i->message ? i->message : "", i->call ? " in " : "", i->call ? i->call : "", i->detail ? ": " : "",
+                   i->detail ? i->detail : "");
+    return CHM_ERR_ABORT;
+}
+
+chm_deadline_action on_miss(const chm_deadline_info_t* info, void* arg) {
+    auto* m = static_cast<chm_module*>(arg);
+    m->misses += info->unhandled;
+    if (m->miss_policy == CHM_SERVO_MISS_ERROR) m->missed_error.store(true);
+    return CHM_DL_CONTINUE;
+}
+
+// However the cycle task ends: a task that did not leave its loop itself
+// was aborted (an error signal or a fault in cycle): the module is in
+// ERROR from then on, its safe values out.
+void on_cycle_end(void* arg) {
+    auto* m = static_cast<chm_module*>(arg);
+    chm_task_status_t st;
+    if (chm_task_status(chm_task_self(), &st) == 0 && st.worst_cycle_cpu_ns > m->worst_ns)
+        m->worst_ns = st.worst_cycle_cpu_ns;
+    if (!m->cycle_done && m->state.load() == CHM_SERVO_ON) {
+        if (!m->last_error[0]) set_last_error(m, "cycle: its task was ended");
+        enter_error(m);
+    }
+}
+
+void apply_pending(chm_module* m) {
+    std::uint32_t mask = m->pending_mask.exchange(0, std::memory_order_acquire);
+    while (mask) {
+        const int k = __builtin_ctz(mask);
+        m->params[k] = m->pending[k];
+        mask &= mask - 1;
+    }
+}
+
+void cycle_task(void* arg) {
+    auto* m = static_cast<chm_module*>(arg);
+    chm_err_on_task(record_cycle_error, m);
+    chm_task_on_end(on_cycle_end, m);
+    bool first = true;
+    for (;;) {
+        const std::uint64_t r = chm_task_cycle_release();
+        const std::uint64_t off = m->off_at.load(std::memory_order_acquire);
+        if (off && r >= off) break;
+        if (first) m->switched_at = r, first = false;
+        if (m->pending_mask.load(std::memory_order_relaxed)) apply_pending(m);
+        m->release_now = r;
+        chm_svar_set_read(m->set);  // -EAGAIN: an input keeps its last value
+        const int rc = m->desc->cycle(m);
+        m->release_now = 0;
+        if (rc != 0 || m->missed_error.load()) {
+            if (rc) set_last_error(m, "cycle returned %d", rc);
+            else set_last_error(m, "deadline missed (miss policy: error)");
+            m->cycle_done = true;
+            enter_error(m);
+            run_entry(m, kEntryError, rc ? rc : ETIME);
+            return;
+        }
+        chm_svar_set_write(m->set);
+        ++m->cycles;
+        chm_task_wait_period();
+    }
+    // Switched off at the first release at or after off_at: this cycle and
+    // every later one belong to the module that took over.
+    m->switched_at = m->off_at.load();
+    m->cycle_done = true;
+    if (m->desc->off(m) != 0) {
+        set_last_error(m, "off failed");
+        enter_error(m);
+        return;
+    }
+    chm_svar_set_release(m->set);
+    m->off_at.store(0);
+    m->state.store(CHM_SERVO_OFF);
+}
+
+// The first multiple of `period` at or after `t`.
+std::uint64_t grid_at_or_after(std::uint64_t t, std::uint64_t period) {
+    return (t + period - 1) / period * period;
+}
+
+int spawn_cycle_task(chm_module* m, std::uint64_t start) {
+    chm_task_attr_t a;
+    chm_task_attr_init(&a);
+    char name[CHM_TASK_NAME_MAX + 1];
+    std::snprintf(name, sizeof name, "%s", m->name);
+    a.name = name;
+    a.priority = m->priority;
+    a.critical = m->critical;
+    a.period_ns = m->period_ns;
+    a.deadline_ns = m->deadline_ns;
+    a.wcet_ns = m->wcet_ns;
+    a.start_ns = start;
+    a.on_deadline = on_miss;
+    a.on_deadline_arg = m;
+    a.joinable = 1;
+    m->cycle_done = false;
+    m->missed_error.store(false);
+    return chm_task_spawn(&m->cycle_task, cycle_task, m, &a);
+}
+
+// Forget a cycle task that has ended (its slot is freed).
+void reap_cycle_task(chm_module* m) {
+    if (m->cycle_task == CHM_TID_NONE) return;
+    chm_task_status_t st;
+    if (chm_task_status(m->cycle_task, &st) == 0 && st.state == CHM_TASK_ENDED) {
+        chm_task_join(m->cycle_task, CHM_NO_WAIT, nullptr);
+        m->cycle_task = CHM_TID_NONE;
+    }
+}
+
+}  // namespace
+
+void stop_cycle_task(chm_module* m) {
+    if (m->cycle_task == CHM_TID_NONE) return;
+    m->off_at.store(1);  // every release is at or after 1
+    if (chm_task_join(m->cycle_task, kStopWaitNs, nullptr) == -ETIMEDOUT) {
+        chm_task_destroy(m->cycle_task);
+        chm_task_join(m->cycle_task, CHM_NO_WAIT, nullptr);
+        if (m->state.load() == CHM_SERVO_ON) run_entry(m, kEntryOff);
+    }
+    m->cycle_task = CHM_TID_NONE;
+    chm_svar_set_release(m->set);
+    m->off_at.store(0);
+    if (m->state.load() == CHM_SERVO_ON) m->state.store(CHM_SERVO_OFF);
+}
+
+int prepare(const Item* items, std::uint32_t count, const char* const* displace, std::uint32_t n_displace, char* why,
+            std::size_t n) {
+    for (std::uint32_t i = 0; i < count; ++i) {
+        chm_module* m = items[i].m;
+        reap_cycle_task(m);
+        const int st = m->state.load();
+        if (items[i].on && st != CHM_SERVO_OFF)
+            return std::snprintf(why, n, "%s is not OFF (state %d): cannot go on", m->name, st), -EALREADY;
+        if (!items[i].on && (st != CHM_SERVO_ON || m->off_at.load()))
+            return std::snprintf(why, n, "%s is not ON: cannot go off", m->name), -EALREADY;
+        if (items[i].on && m->cycle_task != CHM_TID_NONE)
+            return std::snprintf(why, n, "%s is still finishing its last cycle", m->name), -EALREADY;
+    }
+    // Could each module going on claim its outputs? A trial claim that is
+    // given back at once: the claim made at commit displaces the same.
+    for (std::uint32_t i = 0; i < count; ++i) {
+        if (!items[i].on) continue;
+        chm_module* m = items[i].m;
+        if (int r = chm_svar_set_claim(m->set, displace, n_displace)) {
+            std::snprintf(why, n, "%s", chm_bp_last_error());
+            return r;
+        }
+    }
+    for (std::uint32_t i = 0; i < count; ++i)
+        if (items[i].on) chm_svar_set_release(items[i].m->set);
+    return 0;
+}
+
+int commit(std::uint64_t at, const Item* items, std::uint32_t count, const char* const* displace,
+           std::uint32_t n_displace, char* why, std::size_t n) {
+    if (int r = prepare(items, count, displace, n_displace, why, n)) return r;
+    // `on` runs first for every module going on; a failure undoes the
+    // others before anything is armed, and T must still be ahead after.
+    std::uint32_t done = 0;
+    int r = 0;
+    for (; done < count && r == 0; ++done) {
+        chm_module* m = items[done].m;
+        if (!items[done].on) continue;
+        if (run_entry(m, kEntryOn) != 0) {
+            r = -ECANCELED;
+            std::snprintf(why, n, "%s: %s", m->name, m->last_error);
+            enter_error(m);
+        }
+    }
+    if (r == 0 && chm_time_now() >= at) {
+        r = -ETIME;
+        std::snprintf(why, n, "the switch instant passed before this RTPU was ready");
+    }
+    if (r) {
+        for (std::uint32_t i = 0; i + 1 < done; ++i)
+            if (items[i].on) run_entry(items[i].m, kEntryOff);
+        return r;
+    }
+    for (std::uint32_t i = 0; i < count && r == 0; ++i) {
+        chm_module* m = items[i].m;
+        if (!items[i].on) continue;
+        if ((r = chm_svar_set_claim(m->set, displace, n_displace)) != 0) {
+            std::snprintf(why, n, "%s", chm_bp_last_error());
+        } else if ((r = spawn_cycle_task(m, grid_at_or_after(at, m->period_ns))) != 0) {
+            std::snprintf(why, n, "%s: cannot spawn its cycle task (%d)", m->name, r);
+        } else {
+            m->on_at = at;
+            m->state.store(CHM_SERVO_ON);
+        }
+    }
+    if (r) {
+        cancel(at, items, count, displace, n_displace, why, 0);
+        return r;
+    }
+    for (std::uint32_t i = 0; i < count; ++i)
+        if (!items[i].on) items[i].m->off_at.store(at, std::memory_order_release);
+    return 0;
+}
+
+int cancel(std::uint64_t at, const Item* items, std::uint32_t count, const char* const* displace,
+           std::uint32_t n_displace, char* why, std::size_t n) {
+    if (chm_time_now() >= at) {
+        if (n) std::snprintf(why, n, "the switch instant has passed: too late to cancel");
+        return -ETIME;
+    }
+    // Modules going on that were armed lose their task before its first
+    // release and run off; modules going off keep running and take back
+    // their outputs from the modules that displaced them (`displace` here
+    // names every module going on, on any RTPU).
+    for (std::uint32_t i = 0; i < count; ++i) {
+        chm_module* m = items[i].m;
+        if (!items[i].on || m->on_at != at || m->state.load() != CHM_SERVO_ON) continue;
+        chm_task_destroy(m->cycle_task);
+        chm_task_join(m->cycle_task, CHM_NO_WAIT, nullptr);
+        m->cycle_task = CHM_TID_NONE;
+        m->cycle_done = true;
+        run_entry(m, kEntryOff);
+        chm_svar_set_release(m->set);
+        m->on_at = 0;
+        m->state.store(CHM_SERVO_OFF);
+    }
+    for (std::uint32_t i = 0; i < count; ++i) {
+        chm_module* m = items[i].m;
+        if (items[i].on || m->off_at.load() != at) continue;
+        m->off_at.store(0);
+        chm_svar_set_claim(m->set, displace, n_displace);
+    }
+    return 0;
+}
+
+}  // namespace chm::servo

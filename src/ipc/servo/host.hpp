@@ -1,0 +1,54 @@
+// The RTPU side of servo task control: the module table of this RTPU and
+// the operations serve.cpp decodes requests into. All run on the RTPU's
+// express-mail server task, except the cycle task's own work (cycle.cpp).
+// `why` (n bytes) receives the reason of a refusal.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "ipc/servo/servo.hpp"
+
+namespace chm::servo {
+
+// The module at `ref`, if it exists with that generation.
+chm_module* lookup(Ref ref);
+chm_module* find_name(const char* name);
+
+int take(std::uint32_t from, char* why, std::size_t n);
+int release(std::uint32_t from);
+// May `from` change modules here? (It holds control.)
+bool controls(std::uint32_t from);
+
+int spawn(const SpawnReq& q, const ParamOverride* params, const char* path, Ref* out, char* why, std::size_t n);
+int control(chm_module* m, const char* param, double value, char* why, std::size_t n);
+int clear(chm_module* m, char* why, std::size_t n);
+int kill(chm_module* m, char* why, std::size_t n);
+void status(const chm_module* m, StatusReply* out);
+
+// The switch (cycle.cpp). `items` are this RTPU's part; `displace` the
+// instance names of every module going off (any RTPU).
+struct Item {
+    chm_module* m;
+    bool on;
+};
+int prepare(const Item* items, std::uint32_t count, const char* const* displace, std::uint32_t n_displace, char* why,
+            std::size_t n);
+int commit(std::uint64_t at, const Item* items, std::uint32_t count, const char* const* displace,
+           std::uint32_t n_displace, char* why, std::size_t n);
+int cancel(std::uint64_t at, const Item* items, std::uint32_t count, const char* const* displace,
+           std::uint32_t n_displace, char* why, std::size_t n);
+
+// Entry points in their own task (host.cpp): 0, or -ECANCELED with the
+// module's last_error saying why (returned code, error signal, fault).
+enum Entry { kEntryInit, kEntryOn, kEntryOff, kEntryKill, kEntryClear, kEntryError };
+int run_entry(chm_module* m, Entry e, int code = 0);
+// ERROR: the safe values written, last_error kept (any task).
+void enter_error(chm_module* m);
+// Stop a module's cycle task now (kill, teardown): ask it to stop at its
+// next release and wait for it, bounded; destroy it after that.
+void stop_cycle_task(chm_module* m);
+
+void set_last_error(chm_module* m, const char* fmt, ...) __attribute__((format(printf, 2, 3)));
+
+}  // namespace chm::servo

@@ -1,0 +1,121 @@
+// Servo task control (chimera/servo.h, chimera/module.h): the express-mail
+// requests between a controller and the RTPUs that host modules, and the
+// RTPU side's interface (host.cpp, cycle.cpp, serve.cpp). The design is in
+// docs/architecture.md, "Control modules and servo task control".
+//
+// Every request is one express-mail record of kind xmail::kServo: an Op
+// word, then the op's fixed part, then its variable part. Fixed offsets on
+// every target (m68k aligns 64-bit fields to 2 bytes, so each uint64_t
+// sits at a multiple of 8 by construction). The RTPU decodes a copy of the
+// request and checks every count and length against what it received.
+#pragma once
+
+#include <atomic>
+#include <cstddef>
+#include <cstdint>
+
+#include "chimera/module.h"
+#include "chimera/servo.h"
+#include "chimera/svar.h"
+#include "chimera/task.h"
+
+namespace chm::servo {
+
+enum Op : std::uint32_t {
+    kTake = 1, kRelease, kSpawn, kFind, kPrepare, kCommit, kCancel, kControl, kClear, kKill, kStatus, kOutputs,
+    kOpEnd
+};
+
+inline constexpr std::uint32_t kNameLen = 32;
+inline constexpr std::uint32_t kSwitchMax = 16;  // modules of one switch on one RTPU
+inline constexpr std::uint32_t kDisplaceMax = 32;
+
+struct Ref {
+    std::int32_t index;
+    std::uint32_t gen;
+};
+
+struct SpawnReq {
+    std::uint64_t period_ns, deadline_ns, wcet_ns;
+    std::int32_t critical, priority, miss_policy;
+    std::uint32_t n_params;
+    char name[kNameLen];
+    std::uint32_t path_len;  // bytes of the path after the params, NUL included
+    std::uint32_t pad;
+};
+struct ParamOverride {
+    char name[kNameLen];
+    double value;
+};
+static_assert(sizeof(SpawnReq) == 80 && sizeof(ParamOverride) == 40);
+
+struct FindReq {
+    char name[kNameLen];
+};
+
+// kPrepare, kCommit, kCancel: then n Item, then n_displace names.
+struct SwitchReq {
+    std::uint64_t at_ns;  // commit and cancel: T
+    std::uint32_t n;
+    std::uint32_t n_displace;
+};
+struct SwitchItem {
+    Ref ref;
+    std::uint32_t on;  // 1: going on, 0: going off
+    std::uint32_t pad;
+};
+
+struct ControlReq {
+    Ref ref;
+    char name[kNameLen];
+    double value;
+};
+
+struct StatusReply {
+    char name[kNameLen];
+    char module[kNameLen];
+    std::int32_t state;
+    std::uint32_t pad;
+    std::uint64_t period_ns, cycles, misses, worst_ns, switched_at;
+    char last_error[160];
+};
+
+// kOutputs reply: count, then count names.
+struct OutputsReply {
+    std::uint32_t count;
+    std::uint32_t pad;
+};
+
+// ------------------------------------------------------------ RTPU side
+
+// Serve one servo request (on the RTPU's express-mail server task).
+// `from` is the sender's backplane token. The reply goes into rep (room
+// bytes); on failure a NUL-terminated message follows any fixed reply.
+int serve(const char* req, std::uint32_t len, char* rep, std::uint32_t room, std::uint32_t* n, std::uint32_t from);
+
+}  // namespace chm::servo
+
+// An instance, as module code sees it (chm_module_t) and the host keeps it.
+struct chm_module {
+    bool used = false;
+    std::uint32_t gen = 0;
+    int index = 0;
+    char name[chm::servo::kNameLen] = {};
+    void* dl = nullptr;
+    const chm_module_desc_t* desc = nullptr;
+    chm_svar_set_t* set = nullptr;
+    void* state_mem = nullptr;
+    double params[CHM_MODULE_PARAMS_MAX] = {};
+    double pending[CHM_MODULE_PARAMS_MAX] = {};
+    std::atomic<std::uint32_t> pending_mask{0};  // bit i: pending[i] waits for the next cycle
+    std::uint64_t period_ns = 0, deadline_ns = 0, wcet_ns = 0;
+    int critical = 0, priority = 0, miss_policy = 0;
+    std::atomic<int> state{CHM_SERVO_NONE};
+    std::atomic<std::uint64_t> off_at{0};   // the cycle task stops at its first release >= this
+    std::uint64_t on_at = 0;                // committed first release
+    chm_tid_t cycle_task = CHM_TID_NONE;
+    bool cycle_done = false;                // the cycle task left its loop itself
+    std::atomic<bool> missed_error{false};  // a miss under CHM_SERVO_MISS_ERROR
+    std::uint64_t cycles = 0, misses = 0, worst_ns = 0, switched_at = 0, release_now = 0;
+    char last_error[160] = {};
+};
