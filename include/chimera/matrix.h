@@ -186,13 +186,19 @@ int chm_mat_norm(const chm_mat_t* a, enum chm_mat_norm_kind kind, double* out);
  * points to at least CHM_MAT_WORK(n) doubles (n x n + n for an n x n
  * matrix), overwritten, and must not overlap any matrix of the call. The
  * elimination is done in the workspace before any output is written, so a
- * singular matrix leaves the outputs (and an input they alias) untouched. work_len is its
- * length in doubles. A is taken as singular when a pivot's magnitude is at
- * most n * DBL_EPSILON * ||A||inf (the largest row sum of |A|): what is
- * left of the column is then rounding error of the order of the matrix's
- * own elements, and a solution would be dominated by it. The tolerance
- * scales with A, so 1e-200 * I is regular and a matrix whose rows are
- * dependent up to rounding is singular. The cost is O(n^3). */
+ * singular matrix leaves the outputs (and an input they alias) untouched.
+ *
+ * A is taken as singular when a pivot's magnitude is at most
+ *   CHM_MAT_PIVOT_TOL * n * DBL_EPSILON * ||A||inf
+ * (||A||inf: the largest row sum of |A|). The tolerance scales with A, so
+ * 1e-200 * I is regular. Rounding leaves the last pivots of an exactly
+ * singular matrix not zero but up to a few hundred times n * DBL_EPSILON *
+ * ||A||inf (measured over a million random integer matrices of rank n-1;
+ * small earlier pivots amplify it), hence the factor. A regular matrix it
+ * refuses is that close to singular (a condition number of order 1e12 and
+ * beyond for small n): its solution would keep only a few correct digits,
+ * nothing a controller should act on. The cost is O(n^3). */
+#define CHM_MAT_PIVOT_TOL 1024.0
 
 /* *out = det(a) for a square a. A singular a (a pivot within the tolerance)
  * gives exactly 0.0 and status 0: zero is the determinant of a singular

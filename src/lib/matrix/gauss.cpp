@@ -54,8 +54,8 @@ int check_finite(const char* call, const char* what, const chm_mat_t& m) {
 
 // Factor a into the workspace: P*A = L*U, L unit lower (below the
 // diagonal), U upper. Stops at the first pivot within the tolerance
-// n * DBL_EPSILON * ||A||inf; the norm is taken on A scaled by its largest
-// magnitude so that the row sums cannot overflow.
+// CHM_MAT_PIVOT_TOL * n * DBL_EPSILON * ||A||inf; the norm is taken on A
+// scaled by its largest magnitude so that the row sums cannot overflow.
 Lu factor(const chm_mat_t& a, double* work) {
     const Index n = a.rows;
     Lu lu{Work(work, n, n), work + n * n};
@@ -65,7 +65,7 @@ Lu factor(const chm_mat_t& a, double* work) {
     double rows = 0;
     if (big > 0)
         for (Index i = 0; i < n; ++i) rows = std::max(rows, w.row(i).cwiseAbs().sum() / big);
-    const double tol = double(n) * DBL_EPSILON * rows * big;
+    const double tol = CHM_MAT_PIVOT_TOL * double(n) * DBL_EPSILON * rows * big;
     for (Index c = 0; c < n; ++c) {
         Index p = 0;
         const double mag = w.col(c).tail(n - c).cwiseAbs().maxCoeff(&p);
