@@ -122,6 +122,11 @@ constexpr RowInfo kRows[] = {
      "remote semaphore hand-off between two host processes (no kernel) on one core, RT/2"},
     {"rsem_handoff_polling", "ns", "peer_cacheline_pingpong_rtpus", kNull, ratio_le(3),
      "remote semaphore hand-off to a polling RTPU, RT/2"},
+    // ---- the matrix library (issue 18 item 5), at a control loop's size
+    {"mat_mul_6x6", "ns", "peer_eigen_mul_6x6", kNull, none,
+     "chm_mat_mul of two 6x6 views into a third"},
+    {"mat_solve_6x6", "ns", "peer_eigen_lu_solve_6x6", kNull, none,
+     "chm_mat_solve of a 6x6 system, one right-hand side (partial pivoting, caller workspace)"},
     // ---- scaling (issue 6 item 5): the curves are in scaling_rtpus.png and
     // scaling_msg_size.png; one figure of each is a row
     {"msgq_putget_64k_remote_one_process", "ns", "peer_bipc_mq_64k_one_thread", kNull, none,
@@ -238,6 +243,11 @@ constexpr RowInfo kRows[] = {
      "mmap + munmap of a 64 KiB stack, its top page touched"},
     {"peer_array_read", "ns", nullptr, kNull, none, "sum of a 64 KiB local array, per 8-byte word"},
     {"peer_array_write", "ns", nullptr, kNull, none, "fill of a 64 KiB local array, per 8-byte word"},
+    // ---- peers: matrix arithmetic
+    {"peer_eigen_mul_6x6", "ns", nullptr, kNull, none,
+     "Eigen fixed-size 6x6 product, c.noalias() = a * b"},
+    {"peer_eigen_lu_solve_6x6", "ns", nullptr, kNull, none,
+     "Eigen PartialPivLU of a fixed-size 6x6 matrix, compute + solve of one right-hand side"},
     // ---- peers: timers and signals
     {"peer_timer_settime", "ns", nullptr, kNull, none, "timer_settime re-arming a POSIX timer"},
     {"peer_signal_self", "ns", nullptr, kNull, none,
