@@ -45,8 +45,8 @@
  * Arithmetic follows IEEE 754 otherwise: a sum or product that overflows
  * is an infinity, not an error.
  *
- * Calling context: any thread or task; never under the interrupt mask when
- * global error handling is on (nothing is raised there). Views and
+ * Calling context: any thread or task, not a signal handler. Under the
+ * interrupt mask a failure is only returned, never raised. Views and
  * workspaces shared between tasks need the caller's own locking. */
 #ifndef CHIMERA_MATRIX_H
 #define CHIMERA_MATRIX_H
