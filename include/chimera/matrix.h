@@ -22,8 +22,9 @@
  * `chm_mat_add(&x, &dx, &x)` updates x in place. The transpose of a square
  * view into itself is done in place; cross accepts any aliasing; solve and
  * inverse accept any overlap with a, and solve's x may be exactly b.
- * Any other overlap between an output and an input (or the workspace) is
- * refused with -EINVAL (CHM_EMAT_ALIAS) before anything is written. Two
+ * Any other overlap between an output and an input is refused with
+ * -EINVAL (CHM_EMAT_ALIAS), and a workspace overlapping any matrix of the
+ * call with -EINVAL (CHM_EMAT_WORK), before anything is written. Two
  * views with the same stride overlap when they share an element; two views
  * with different strides are taken as overlapping when their address
  * ranges intersect.
