@@ -129,6 +129,11 @@ constexpr RowInfo kRows[] = {
      "copy-in + copy-out of a 64-double input and a 64-double output (1 KiB in all)"},
     {"svar_copy_in_out_1024d", "ns", "peer_memcpy_16kib", kNull, {Target::kRatioPlusAtMost, 1.5, 100},
      "copy-in + copy-out of a 1024-double input and a 1024-double output (16 KiB in all)"},
+    // ---- the matrix library (issue 18 item 5), at a control loop's size
+    {"mat_mul_6x6", "ns", "peer_eigen_mul_6x6", kNull, none,
+     "chm_mat_mul of two 6x6 views into a third"},
+    {"mat_solve_6x6", "ns", "peer_eigen_lu_solve_6x6", kNull, none,
+     "chm_mat_solve of a 6x6 system, one right-hand side (partial pivoting, caller workspace)"},
     // ---- scaling (issue 6 item 5): the curves are in scaling_rtpus.png and
     // scaling_msg_size.png; one figure of each is a row
     {"msgq_putget_64k_remote_one_process", "ns", "peer_bipc_mq_64k_one_thread", kNull, none,
@@ -247,6 +252,11 @@ constexpr RowInfo kRows[] = {
     {"peer_array_write", "ns", nullptr, kNull, none, "fill of a 64 KiB local array, per 8-byte word"},
     {"peer_memcpy_1kib", "ns", nullptr, kNull, none, "memcpy of 512 B, twice (1 KiB in all), cache-resident"},
     {"peer_memcpy_16kib", "ns", nullptr, kNull, none, "memcpy of 8 KiB, twice (16 KiB in all), cache-resident"},
+    // ---- peers: matrix arithmetic
+    {"peer_eigen_mul_6x6", "ns", nullptr, kNull, none,
+     "Eigen fixed-size 6x6 product, c.noalias() = a * b"},
+    {"peer_eigen_lu_solve_6x6", "ns", nullptr, kNull, none,
+     "Eigen PartialPivLU of a fixed-size 6x6 matrix, compute + solve of one right-hand side"},
     // ---- peers: timers and signals
     {"peer_timer_settime", "ns", nullptr, kNull, none, "timer_settime re-arming a POSIX timer"},
     {"peer_signal_self", "ns", nullptr, kNull, none,

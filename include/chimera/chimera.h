@@ -9,6 +9,7 @@
 #include "chimera/io.h"
 #include "chimera/irq.h"
 #include "chimera/kernel.h"
+#include "chimera/matrix.h"
 #include "chimera/mem.h"
 #include "chimera/module.h"
 #include "chimera/msgq.h"
