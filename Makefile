@@ -9,7 +9,7 @@ FUZZ_SECONDS ?= 300
 MESON_TEST  ?= meson test --print-errorlogs --num-processes 2
 
 PKGS_BUILD = meson ninja-build g++ pkg-config python3 libgtest-dev libgmock-dev \
-             libboost-dev libboost-context-dev libeigen3-dev
+             libboost-dev libboost-context-dev libeigen3-dev libtomlplusplus-dev
 PKGS_CROSS = g++-m68k-linux-gnu libc6-dev-m68k-cross \
              g++-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user
 PKGS_BENCH = libbenchmark-dev rt-tests python3-matplotlib
