@@ -246,7 +246,7 @@ int lookup(const chm_config* cfg, const char* key, Found* f) {
             if (!next) {
                 f->holder = cur;
                 f->holder_path = so_far;
-                f->missing = "'" + s.key + "'";
+                f->missing = squote(s.key);
                 return 0;
             }
             cur = next;
@@ -377,7 +377,7 @@ int chm_config_key(const chm_config_t* cfg, const char* table, size_t index, cha
         if (k->str().size() >= len) {
             const auto& at = k->source().begin;
             return failf(-ENAMETOOLONG, "%s:%u:%u: key %s is longer than %zu bytes", cfg->name.c_str(),
-                         at.line, at.column, quote(k->str()).c_str(), len - 1);
+                         at.line, at.column, squote(k->str()).c_str(), len - 1);
         }
         std::memcpy(buf, k->str().data(), k->str().size());
         buf[k->str().size()] = '\0';
