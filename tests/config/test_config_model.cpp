@@ -10,6 +10,7 @@
 #include <cerrno>
 #include <cinttypes>
 #include <cmath>
+#include <cstdio>
 #include <cstdlib>
 #include <map>
 #include <memory>
@@ -202,6 +203,8 @@ std::string at(const Node& n) { return "m.toml:" + std::to_string(n.line) + ":" 
 std::string err() { return chm_config_last_error(); }
 bool starts(const std::string& s, const std::string& p) { return s.rfind(p, 0) == 0; }
 
+std::size_t g_checked = 0;  // values and tables compared, so a run that checks nothing fails
+
 // Checks everything under table `t` (at `path`) against the parsed document.
 void check(chm_config_t* cfg, Gen& g, const Node& t, const std::string& path) {
     const Node root_pos{Kind::Table, 0, 0, false, {}, {}, {}, {}, {}, 1, 1};
@@ -228,6 +231,7 @@ void check(chm_config_t* cfg, Gen& g, const Node& t, const std::string& path) {
     for (std::size_t i = 0; i < t.keys.size(); ++i) {
         const auto& [k, v] = t.keys[i];
         const std::string p = Writer::join(path, k);
+        ++g_checked;
         char name[64];
         ASSERT_EQ(chm_config_key(cfg, path.c_str(), i, name, sizeof name), 0) << err();
         ASSERT_EQ(name, k) << "document order in " << path;
@@ -334,6 +338,8 @@ TEST(ConfigModel, RandomDocumentsReadBackAsWritten) {
         chm_config_close(cfg);
         ASSERT_FALSE(HasFatalFailure()) << "seed " << seed << ", document:\n" << w.text;
     }
+    std::printf("%d documents, %zu values compared\n", docs, g_checked);
+    EXPECT_GT(g_checked, 1000u);
 }
 
 }  // namespace

@@ -2,14 +2,7 @@
 // by document.cpp (parsing, paths, keys) and values.cpp (typed getters).
 #pragma once
 
-// toml++ header-only everywhere: the cross builds have no target copy of
-// Debian's libtomlplusplus, and one mode means one behaviour. No toml++
-// exceptions: a parse error comes back as a value; the library itself is
-// still compiled with exceptions so std::bad_alloc can become -ENOMEM.
-#define TOML_HEADER_ONLY 1
-#define TOML_EXCEPTIONS 0
-#define TOML_ENABLE_FORMATTERS 0
-#include <toml.h>  // -isystem /usr/include/toml++: toml++'s headers only
+#include "toml.hpp"
 
 #include <cerrno>
 #include <cstdarg>
