@@ -58,6 +58,22 @@ TEST(ConfigParse, DuplicateKeyAndBadValue) {
     EXPECT_EQ(err().rfind("<string>:2:", 0), 0u) << err();
 }
 
+// toml++ 3.3.0 asserted (or, under NDEBUG, assumed) that a table header
+// starts with a key character: src/lib/config/toml.hpp.
+TEST(ConfigParse, TableHeaderWithoutKeyIsASyntaxError) {
+    for (const std::string text : {"[{module]\n", "[[{module]]\n", "a = 1\n[ =]\n"}) {
+        chm_config_t* cfg = nullptr;
+        EXPECT_EQ(chm_config_parse(text.data(), text.size(), "h.toml", &cfg), -EBADMSG) << text;
+        EXPECT_NE(err().find("expected bare key starting character or string delimiter"), std::string::npos)
+            << err();
+    }
+    chm_config_t* cfg = nullptr;
+    const std::string text = "[{module]\n";
+    EXPECT_EQ(chm_config_parse(text.data(), text.size(), "h.toml", &cfg), -EBADMSG);
+    EXPECT_EQ(err(), "h.toml:1:2: Error while parsing key: expected bare key starting character or "
+                     "string delimiter, saw '{'");
+}
+
 TEST(ConfigParse, LengthNotNulTerminated) {
     // Only len bytes are read: the "= 2" beyond them never parses.
     const char text[] = "k = 1x = 2";

@@ -9,6 +9,17 @@
 #define TOML_EXCEPTIONS 0
 #define TOML_ENABLE_FORMATTERS 0
 
+// toml++ 3.3.0 states parser preconditions it does not ensure: a table
+// header such as `[{a]` reaches parse_key() on a '{', whose
+// TOML_ASSERT_ASSUME aborts the process (assert) or, under NDEBUG, lets
+// the compiler assume the impossible (__builtin_assume): undefined
+// behaviour. parse_key() itself reports such a character as a syntax
+// error, so these checks are made nothing at all (found by fuzz_config,
+// regress/config/toml-table-header-assert). Its plain TOML_ASSERTs stay.
+#include <impl/preprocessor.h>
+#undef TOML_ASSERT_ASSUME
+#define TOML_ASSERT_ASSUME(expr) static_assert(true)
+
 // toml++ 3.3.0 (Debian 12) is_non_ascii_horizontal_whitespace(): for code
 // points U+00A1..U+0499, U+2C5E..U+3057 and U+FB26..U+FEFE (the blocks
 // its case table forgot) the generated lookup reaches
