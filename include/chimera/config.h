@@ -5,9 +5,9 @@
  * A document is opened from a file or parsed from a string, then read by
  * key path: dotted keys with array indices, e.g. "arm.gain",
  * "module[2].rate_hz", "module[0].inputs[1]", "limits.\"max.speed\"" (a
- * quoted segment may hold dots; "" is the root table). A getter returns
- * the caller's default when the key is absent; its require_ twin makes an
- * absent key an error. A value of the wrong type or out of range is
+ * quoted segment may hold dots, not a double quote: there are no escapes;
+ * "" is the root table). A getter returns the caller's default when the
+ * key is absent; its require_ twin makes an absent key an error. A value of the wrong type or out of range is
  * always an error, never silently replaced by the default.
  *
  * Every function returns 0 (or a count, where said) or a negative
