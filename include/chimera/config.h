@@ -7,15 +7,16 @@
  * "module[2].rate_hz", "module[0].inputs[1]", "limits.\"max.speed\"" (a
  * quoted segment may hold dots, not a double quote: there are no escapes;
  * "" is the root table). A getter returns the caller's default when the
- * key is absent; its require_ twin makes an absent key an error. A value of the wrong type or out of range is
- * always an error, never silently replaced by the default.
+ * key is absent; its require_ twin makes an absent key an error. A value
+ * of the wrong type or out of range is always an error, never silently
+ * replaced by the default.
  *
- * Every function returns 0 (or a count, where said) or a negative
+ * Every function returns 0 (chm_config_type: a type) or a negative
  * errno-style status. After an error, chm_config_last_error() gives a
  * message naming the place in the document:
  *     system.toml:12:11: module[1].rate_hz: expected an integer in [1, 10000], got integer 0
  *     system.toml:7:1: arm.gain: expected a number, got nothing (table 'arm' has no key 'gain')
- *     system.toml:3:5: unknown key 'gian' in table 'arm' (did you mean 'gain'?)
+ *     system.toml:3:1: unknown key 'gian' in table 'arm' (did you mean 'gain'?)
  * A missing key is placed at the table that should hold it.
  * Statuses: -EINVAL a caller bug (NULL argument, malformed key path,
  * min > max, a default outside its range); -ENOENT a required key is
