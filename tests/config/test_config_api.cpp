@@ -8,6 +8,7 @@
 #include <cstdint>
 #include <fstream>
 #include <string>
+#include <thread>
 
 #include "chimera/chimera.h"
 
@@ -128,6 +129,33 @@ TEST(ConfigOpen, MissingFileDirectoryAndSyntax) {
     EXPECT_EQ(chm_config_open(path.c_str(), &cfg), -EBADMSG);
     EXPECT_EQ(err().rfind(path + ":2:", 0), 0u) << err();
     std::remove(path.c_str());
+}
+
+TEST(ConfigOpen, LargerThan16MiBRefused) {
+    const std::string path = ::testing::TempDir() + "chm_config_big.toml";
+    {
+        std::ofstream f(path);
+        const std::string line(1023, '#');
+        for (int i = 0; i < 16 * 1024 + 1; ++i) f << line << '\n';
+    }
+    chm_config_t* cfg = nullptr;
+    EXPECT_EQ(chm_config_open(path.c_str(), &cfg), -EFBIG);
+    EXPECT_EQ(err(), path + ": larger than 16 MiB");
+    std::remove(path.c_str());
+}
+
+TEST(ConfigErrors, MessageIsPerThread) {
+    Doc d(kBasic);
+    int64_t v = 0;
+    ASSERT_EQ(chm_config_require_int64(d.cfg, "nope", 0, 1, &v), -ENOENT);
+    const std::string mine = err();
+    std::string theirs;
+    std::thread([&] {
+        EXPECT_EQ(chm_config_require_int64(d.cfg, "count", 0, 1, &v), -EBADMSG);
+        theirs = err();
+    }).join();
+    EXPECT_EQ(err(), mine);
+    EXPECT_EQ(theirs, "t.toml:2:9: count: expected an integer in [0, 1], got integer 7");
 }
 
 TEST(ConfigGet, IntegersWithDefaultsAndRanges) {
