@@ -9,14 +9,14 @@ FUZZ_SECONDS ?= 300
 MESON_TEST  ?= meson test --print-errorlogs --num-processes 2
 
 PKGS_BUILD = meson ninja-build g++ pkg-config python3 libgtest-dev libgmock-dev \
-             libboost-dev libboost-context-dev libeigen3-dev
+             libboost-dev libboost-context-dev libeigen3-dev libtomlplusplus-dev
 PKGS_CROSS = g++-m68k-linux-gnu libc6-dev-m68k-cross \
              g++-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user
 PKGS_BENCH = libbenchmark-dev rt-tests python3-matplotlib
 # clang's -fsanitize=fuzzer links libclang_rt.fuzzer, which Debian 12
 # ships in libclang-rt-14-dev (libfuzzer-14-dev is the standalone copy).
 PKGS_FUZZ  = clang libclang-rt-14-dev
-FUZZ_TARGETS = fuzz_backplane fuzz_msgq fuzz_xmail fuzz_args
+FUZZ_TARGETS = fuzz_backplane fuzz_msgq fuzz_xmail fuzz_args fuzz_config
 
 .PHONY: all deps deps-cross deps-bench deps-fuzz build demo demo-multi stress test test-native test-m68k \
         test-aarch64 test-fuzz fuzz fuzz-seeds bench clean
@@ -87,7 +87,7 @@ test-aarch64: deps deps-cross build-aarch64/build.ninja
 $(BUILD_FUZZ)/build.ninja:
 	CC=clang CXX=clang++ meson setup $(BUILD_FUZZ) -Dfuzz=true
 
-# Each harness briefly (suite fuzz: 60 + 20 + 15 + 10 s, two at a time).
+# Each harness briefly (suite fuzz: 60 + 20 + 15 + 10 + 20 s, two at a time).
 test-fuzz: deps-fuzz $(BUILD_FUZZ)/build.ninja
 	ninja -C $(BUILD_FUZZ) $(FUZZ_TARGETS:%=tests/fuzz/%)
 	$(MESON_TEST) -C $(BUILD_FUZZ) --suite fuzz --no-rebuild
@@ -98,13 +98,15 @@ fuzz: deps-fuzz $(BUILD_FUZZ)/build.ninja
 	ninja -C $(BUILD_FUZZ) $(FUZZ_TARGETS:%=tests/fuzz/%)
 	for t in $(FUZZ_TARGETS); do \
 	    r=tests/fuzz/regress/$${t#fuzz_}; [ -d $$r ] || r=; \
-	    tests/fuzz/run.sh $(BUILD_FUZZ)/tests/fuzz/$$t tests/fuzz/corpus/$${t#fuzz_} $(FUZZ_SECONDS) $$r || exit 1; \
+	    d=tests/fuzz/$${t#fuzz_}.dict; [ -f $$d ] && d=-dict=$$d || d=; \
+	    tests/fuzz/run.sh $(BUILD_FUZZ)/tests/fuzz/$$t tests/fuzz/corpus/$${t#fuzz_} $(FUZZ_SECONDS) $$r $$d || exit 1; \
 	done
 
-# Regenerate the committed seed corpora (tests/fuzz/make_seeds.cpp).
+# Regenerate the committed seed corpora (tests/fuzz/make_seeds.cpp); the
+# configuration seeds (corpus/config) are hand-written TOML and stay.
 fuzz-seeds: deps-fuzz $(BUILD_FUZZ)/build.ninja
 	ninja -C $(BUILD_FUZZ) tests/fuzz/fuzz-make-seeds
-	rm -rf tests/fuzz/corpus
+	rm -rf tests/fuzz/corpus/backplane tests/fuzz/corpus/msgq tests/fuzz/corpus/xmail tests/fuzz/corpus/args
 	mkdir -p tests/fuzz/corpus/backplane tests/fuzz/corpus/msgq tests/fuzz/corpus/xmail tests/fuzz/corpus/args
 	$(BUILD_FUZZ)/tests/fuzz/fuzz-make-seeds tests/fuzz/corpus
 

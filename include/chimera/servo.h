@@ -24,6 +24,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "chimera/svar.h"
+
 #ifdef __cplusplus
 extern "C" {
 #endif
@@ -153,6 +155,82 @@ int chm_servo_status(chm_servo_module_t m, chm_servo_status_t* out);
 
 /* Why the calling thread's last servo call failed. */
 const char* chm_servo_last_error(void);
+
+/* ------------------------------------------------------------- systems
+ *
+ * A system's layout in a configuration file (TOML, chimera/config.h): the
+ * state variables to declare and the modules to spawn. Unknown keys are
+ * refused; every error names file:line:column.
+ *
+ *     [[svar]]
+ *     name = "q"              # 1..31 characters
+ *     type = "double"         # double, float, int32, uint32, bool
+ *     rows = 3                # default 1; cols likewise (3 x 1: a vector)
+ *     unit = "rad"            # optional
+ *
+ *     [[module]]
+ *     name = "joint_pd"       # instance name, unique on its RTPU
+ *     path = "libjoint_pd.so" # relative: to the configuration file's directory
+ *     rtpu = 1
+ *     rate_hz = 500           # 0.01 .. 100000; the period is 1/rate, in whole ns
+ *     deadline_ms = 2         # optional: relative deadline (default the period)
+ *     wcet_us = 300           # optional: estimated CPU per cycle (MLF, MUF)
+ *     critical = true         # optional: MUF critical set (default false)
+ *     priority = 5            # optional (default 0)
+ *     on_miss = "count"       # or "error" (default "count")
+ *     on = true               # switched on by chm_servo_system_start
+ *     params = { kp = 100.0, kd = 8.0 }   # overrides of the module's defaults
+ */
+typedef struct chm_servo_system chm_servo_system_t;
+
+/* Read and check the configuration file `path`. Nothing is declared or
+ * spawned. Errors: -EINVAL NULL; -ENOENT no such file, or a required key
+ * absent; -EBADMSG the file is wrong (the message gives file:line:column:
+ * a syntax error, an unknown key, a value of the wrong type or out of
+ * range, a variable declared twice, a module named twice on one RTPU);
+ * -ENOMEM. chm_servo_system_last_error() says what failed. */
+int chm_servo_system_open(const char* path, chm_servo_system_t** out);
+
+/* Declare every state variable of the file (chm_svar_declare). Errors:
+ * those of chm_svar_declare (the message names the file and variable). */
+int chm_servo_system_declare(chm_servo_system_t* sys);
+
+/* Take control of every RTPU the file names and spawn every module there,
+ * OFF. On error the modules spawned so far are killed. Errors: those of
+ * chm_servo_take and chm_servo_spawn, the message naming the module. */
+int chm_servo_system_spawn(chm_servo_system_t* sys);
+
+/* Switch on, in one switch (chm_servo_switch), every module whose `on` is
+ * true; *at_ns (may be NULL) receives the instant. Errors: -ESRCH a module
+ * is not spawned; those of chm_servo_switch. */
+int chm_servo_system_start(chm_servo_system_t* sys, uint64_t* at_ns);
+
+/* One module of the file, in file order. */
+typedef struct {
+    const char* name;
+    const char* path;        /* resolved */
+    int rtpu;
+    uint64_t period_ns;
+    int on;                  /* switched on at start */
+    int spawned;
+    chm_servo_module_t id;   /* valid once spawned */
+} chm_servo_system_entry_t;
+size_t chm_servo_system_modules(const chm_servo_system_t* sys);
+/* Errors: -EINVAL NULL or no such index. */
+int chm_servo_system_module_at(const chm_servo_system_t* sys, size_t i, chm_servo_system_entry_t* out);
+/* The module called `name` (spawned). Errors: -EINVAL NULL; -ENOENT no
+ * such module in the file; -ESRCH not spawned. */
+int chm_servo_system_find(const chm_servo_system_t* sys, const char* name, chm_servo_module_t* out);
+/* The file's state variables, in file order (the strings live as long as
+ * the system). Errors: -EINVAL NULL or no such index. */
+size_t chm_servo_system_svars(const chm_servo_system_t* sys);
+int chm_servo_system_svar(const chm_servo_system_t* sys, size_t i, chm_svar_decl_t* out);
+
+/* Free the description (modules run on; kill them with chm_servo_kill). */
+void chm_servo_system_close(chm_servo_system_t* sys);
+
+/* Why the calling thread's last chm_servo_system_ call failed. */
+const char* chm_servo_system_last_error(void);
 
 #ifdef __cplusplus
 }

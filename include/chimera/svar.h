@@ -158,6 +158,22 @@ int chm_svar_set_open(const char* owner, const char* const* inputs, size_t n_in,
  * the set's attachment is gone. */
 int chm_svar_set_claim(chm_svar_set_t* set, const char* const* displace, size_t n_displace);
 
+/* Would chm_svar_set_claim(set, displace, n_displace) succeed now? Changes
+ * nothing. 0, or the errors of chm_svar_set_claim (-EBUSY naming the
+ * variable and its writer). */
+int chm_svar_set_check_claim(chm_svar_set_t* set, const char* const* displace, size_t n_displace);
+
+/* chm_svar_set_claim for a switch at instant `at_ns` (monotonic ns): the
+ * claim is recorded as holding from then on, and a displaced set learns it
+ * through chm_svar_set_displaced. Errors: those of chm_svar_set_claim. */
+int chm_svar_set_claim_at(chm_svar_set_t* set, const char* const* displace, size_t n_displace, uint64_t at_ns);
+
+/* 1 when another set has taken one of this set's outputs with a hand-over
+ * instant at or before `release_ns` (the writer must stop writing from the
+ * cycle released then), else 0 (also for a NULL set, or one that holds no
+ * claim). A few atomic loads per output: cheap enough for every cycle. */
+int chm_svar_set_displaced(const chm_svar_set_t* set, uint64_t release_ns);
+
 /* Give up the set's claims (those still naming it); the set stays open
  * for reading. Errors: -EINVAL NULL; -ETIMEDOUT. */
 int chm_svar_set_release(chm_svar_set_t* set);

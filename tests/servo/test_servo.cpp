@@ -264,6 +264,7 @@ TEST_F(Servo, EverySwitchedCycleHasExactlyOneWriter) {
             ++done;
             continue;
         }
+        if (std::getenv("CHM_SERVO_VERBOSE")) std::fprintf(stderr, "switch %d: %d %s\n", done, r, chm_servo_last_error());
         if (r == -ETIME) ++refused_late;
         else if (r == -EALREADY) ++busy;  // the last one off is still finishing its cycle
         else FAIL() << "switch " << done << ": " << r << " " << chm_servo_last_error();

@@ -116,7 +116,7 @@ int switch_impl(const chm_servo_module_t* off, size_t n_off, const chm_servo_mod
             return say("chm_servo_switch: the periods have no common boundary within 10 s"), -EINVAL;
     }
     std::vector<std::vector<std::string>> outs(all.size());
-    for (std::size_t i = n_off; i < all.size(); ++i) {
+    for (std::size_t i = 0; i < all.size(); ++i) {
         char rep[1024];
         std::uint32_t got = 0;
         const Ref r = ref_of(all[i]);
@@ -125,7 +125,7 @@ int switch_impl(const chm_servo_module_t* off, size_t n_off, const chm_servo_mod
         std::memcpy(&h, rep, sizeof h);
         for (std::uint32_t k = 0; k < h.count && sizeof h + (k + 1) * kNameLen <= got; ++k)
             outs[i].emplace_back(std::string(rep + sizeof h + k * kNameLen, strnlen(rep + sizeof h + k * kNameLen, kNameLen)));
-        for (std::size_t j = n_off; j < i; ++j)
+        for (std::size_t j = n_off; j < i && i >= n_off; ++j)
             for (const std::string& v : outs[i])
                 if (std::find(outs[j].begin(), outs[j].end(), v) != outs[j].end())
                     return say("chm_servo_switch: state variable %s would be written by both %s and %s", v.c_str(),
@@ -140,8 +140,23 @@ int switch_impl(const chm_servo_module_t* off, size_t n_off, const chm_servo_mod
         if (it == parts.end()) it = parts.insert(parts.end(), Part{all[i].rtpu, {}});
         if (it->items.size() == kSwitchMax)
             return say("chm_servo_switch: more than %u modules on RTPU %d", kSwitchMax, all[i].rtpu), -EINVAL;
-        it->items.push_back(SwitchItem{ref_of(all[i]), i >= n_off ? 1u : 0u, 0});
+        // A module going off whose output a module going on takes is
+        // handed over: it stops when that happens, not on its own.
+        std::uint32_t kind = i >= n_off ? 1u : 0u;
+        for (std::size_t j = n_off; j < all.size() && kind == 0; ++j)
+            for (const std::string& v : outs[i])
+                if (std::find(outs[j].begin(), outs[j].end(), v) != outs[j].end()) kind = 2;
+        it->items.push_back(SwitchItem{ref_of(all[i]), kind, 0});
     }
+    // Commits that switch modules on go first: they decide every hand-over
+    // (an RTPU too late for T refuses, and its variables keep their old
+    // writer); the parts that only switch off follow.
+    std::stable_sort(parts.begin(), parts.end(), [](const Part& a, const Part& b) {
+        auto ons = [](const Part& p) {
+            return std::count_if(p.items.begin(), p.items.end(), [](const SwitchItem& x) { return x.on == 1; });
+        };
+        return ons(a) > ons(b);
+    });
     // Phase 1: every RTPU says whether it can (nothing changes yet).
     const std::uint64_t t0 = now_ns();
     bool left_out = false;
@@ -167,8 +182,16 @@ int switch_impl(const chm_servo_module_t* off, size_t n_off, const chm_servo_mod
         if (r == 0) continue;
         char why[sizeof t_error];
         std::snprintf(why, sizeof why, "%s", t_error);
-        for (std::size_t j = 0; j < k; ++j) send_switch(kCancel, parts[j], at, on_names);
-        say("chm_servo_switch: %s (nothing switched)", why);
+        // Undo before T: modules armed to go on are disarmed, modules that
+        // would have been handed over take their outputs back (on every
+        // part, committed or not). After T a cancel is refused, and what
+        // was committed stands: each variable then has its new writer or
+        // its old one, never both or none.
+        int undone = 0;
+        for (std::size_t j = 0; j < parts.size(); ++j)
+            if (j != k && send_switch(kCancel, parts[j], at, on_names) == 0) ++undone;
+        if (undone == int(parts.size()) - 1) say("chm_servo_switch: %s (nothing switched)", why);
+        else say("chm_servo_switch: %s (too late to undo: the parts committed before it switched)", why);
         return r == -ETIME ? -ETIME : r;
     }
     if (at_ns) *at_ns = at;

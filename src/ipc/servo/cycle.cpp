@@ -63,6 +63,12 @@ void cycle_task(void* arg) {
         const std::uint64_t r = chm_task_cycle_release();
         const std::uint64_t off = m->off_at.load(std::memory_order_acquire);
         if (off && r >= off) break;
+        // Handed over: a module switched on at T took an output, so this
+        // cycle (released at or after T) is the new writer's.
+        if (chm_svar_set_displaced(m->set, r)) {
+            m->off_at.store(r);
+            break;
+        }
         if (first) m->switched_at = r, first = false;
         if (m->pending_mask.load(std::memory_order_relaxed)) apply_pending(m);
         m->release_now = r;
@@ -159,24 +165,39 @@ int prepare(const Item* items, std::uint32_t count, const char* const* displace,
         if (items[i].on && m->cycle_task != CHM_TID_NONE)
             return std::snprintf(why, n, "%s is still finishing its last cycle", m->name), -EALREADY;
     }
-    // Could each module going on claim its outputs? A trial claim that is
-    // given back at once: the claim made at commit displaces the same.
+    // Could each module going on claim its outputs? Asked without taking
+    // anything: a claim, even one given back at once, would tell the
+    // writer it displaces to stop.
     for (std::uint32_t i = 0; i < count; ++i) {
         if (!items[i].on) continue;
-        chm_module* m = items[i].m;
-        if (int r = chm_svar_set_claim(m->set, displace, n_displace)) {
+        if (int r = chm_svar_set_check_claim(items[i].m->set, displace, n_displace)) {
             std::snprintf(why, n, "%s", chm_bp_last_error());
             return r;
         }
     }
-    for (std::uint32_t i = 0; i < count; ++i)
-        if (items[i].on) chm_svar_set_release(items[i].m->set);
     return 0;
 }
 
 int commit(std::uint64_t at, const Item* items, std::uint32_t count, const char* const* displace,
            std::uint32_t n_displace, char* why, std::size_t n) {
-    if (int r = prepare(items, count, displace, n_displace, why, n)) return r;
+    // A module handed over needs nothing here (it stops when its outputs
+    // are taken, and may have done so already if this commit is late);
+    // the others are checked again.
+    Item rest[kSwitchMax];
+    std::uint32_t n_rest = 0;
+    for (std::uint32_t i = 0; i < count; ++i)
+        if (!items[i].handed) rest[n_rest++] = items[i];
+    if (int r = prepare(rest, n_rest, displace, n_displace, why, n)) return r;
+    items = rest;
+    count = n_rest;
+    bool any_on = false;
+    for (std::uint32_t i = 0; i < count; ++i) any_on |= items[i].on;
+    if (!any_on) {
+        // Only modules going off alone: each stops at its first release at
+        // or after T (at once when this commit comes later than T).
+        for (std::uint32_t i = 0; i < count; ++i) items[i].m->off_at.store(at, std::memory_order_release);
+        return 0;
+    }
     // `on` runs first for every module going on; a failure undoes the
     // others before anything is armed, and T must still be ahead after.
     std::uint32_t done = 0;
@@ -192,7 +213,7 @@ int commit(std::uint64_t at, const Item* items, std::uint32_t count, const char*
     }
     if (r == 0 && chm_time_now() >= at) {
         r = -ETIME;
-        std::snprintf(why, n, "the switch instant passed before this RTPU was ready");
+        std::snprintf(why, n, "the switch instant passed before this RTPU was ready (nothing switched here)");
     }
     if (r) {
         for (std::uint32_t i = 0; i + 1 < done; ++i)
@@ -202,7 +223,7 @@ int commit(std::uint64_t at, const Item* items, std::uint32_t count, const char*
     for (std::uint32_t i = 0; i < count && r == 0; ++i) {
         chm_module* m = items[i].m;
         if (!items[i].on) continue;
-        if ((r = chm_svar_set_claim(m->set, displace, n_displace)) != 0) {
+        if ((r = chm_svar_set_claim_at(m->set, displace, n_displace, at)) != 0) {
             std::snprintf(why, n, "%s", chm_bp_last_error());
         } else if ((r = spawn_cycle_task(m, grid_at_or_after(at, m->period_ns))) != 0) {
             std::snprintf(why, n, "%s: cannot spawn its cycle task (%d)", m->name, r);
@@ -215,8 +236,11 @@ int commit(std::uint64_t at, const Item* items, std::uint32_t count, const char*
         cancel(at, items, count, displace, n_displace, why, 0);
         return r;
     }
+    // A module handed over stops when it finds its outputs taken (at T,
+    // if the module taking them was committed in time, else never): the
+    // variable is never without a writer. The others stop at T.
     for (std::uint32_t i = 0; i < count; ++i)
-        if (!items[i].on) items[i].m->off_at.store(at, std::memory_order_release);
+        if (!items[i].on && !items[i].handed) items[i].m->off_at.store(at, std::memory_order_release);
     return 0;
 }
 
@@ -226,6 +250,7 @@ int cancel(std::uint64_t at, const Item* items, std::uint32_t count, const char*
         if (n) std::snprintf(why, n, "the switch instant has passed: too late to cancel");
         return -ETIME;
     }
+    // Must beat T: nothing here may block long (off runs in a bounded task).
     // Modules going on that were armed lose their task before its first
     // release and run off; modules going off keep running and take back
     // their outputs from the modules that displaced them (`displace` here
@@ -244,8 +269,8 @@ int cancel(std::uint64_t at, const Item* items, std::uint32_t count, const char*
     }
     for (std::uint32_t i = 0; i < count; ++i) {
         chm_module* m = items[i].m;
-        if (items[i].on || m->off_at.load() != at) continue;
-        m->off_at.store(0);
+        if (items[i].on) continue;
+        if (m->off_at.load() == at) m->off_at.store(0);
         chm_svar_set_claim(m->set, displace, n_displace);
     }
     return 0;

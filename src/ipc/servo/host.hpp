@@ -31,6 +31,7 @@ void status(const chm_module* m, StatusReply* out);
 struct Item {
     chm_module* m;
     bool on;
+    bool handed;  // going off because a module going on takes its outputs
 };
 int prepare(const Item* items, std::uint32_t count, const char* const* displace, std::uint32_t n_displace, char* why,
             std::size_t n);

@@ -75,7 +75,8 @@ int decode_switch(const char* req, std::uint32_t len, SwitchReq* q, Item* items,
         SwitchItem it;
         std::memcpy(&it, p, sizeof it);
         items[i].m = lookup(it.ref);
-        items[i].on = it.on != 0;
+        items[i].on = it.on == 1;
+        items[i].handed = it.on == 2;
         if (!items[i].m)
             return std::snprintf(why, wn, "no module %d generation %u here (killed?)", it.ref.index, it.ref.gen),
                    -ESTALE;

@@ -61,7 +61,7 @@ struct SwitchReq {
 };
 struct SwitchItem {
     Ref ref;
-    std::uint32_t on;  // 1: going on, 0: going off
+    std::uint32_t on;  // 1: going on; 0: going off at T; 2: going off when its outputs are taken at T
     std::uint32_t pad;
 };
 

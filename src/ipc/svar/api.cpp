@@ -83,6 +83,8 @@ int declare_locked(const Table& t, const chm_svar_decl_t* d) {
     e->bseq[1].store(0, R);
     e->writer_token.store(0, R);
     e->writer_id.store(0, R);
+    e->since_lo.store(0, R);
+    e->since_hi.store(0, R);
     std::memset(e->name, 0, kNameLen);
     std::memcpy(e->name, d->name, std::strlen(d->name));
     std::memset(e->unit, 0, kUnitLen);

@@ -190,7 +190,7 @@ bool displaceable(const Entry* e, const char* const* displace, size_t n) {
 
 // Claim every output for `s`, all or none, under the table lock; a live
 // writer named in `displace` passes its claim on.
-int claim_outputs(chm_svar_set* s, const char* const* displace, size_t n_displace) {
+int claim_outputs(chm_svar_set* s, const char* const* displace, size_t n_displace, std::uint64_t since = 0) {
     if (s->n_out == 0) return 0;
     auto mine = [s](const Entry* e) {
         return e->writer_token.load(Acq) == s->a->token && e->writer_id.load(Acq) == s->id;
@@ -212,6 +212,8 @@ int claim_outputs(chm_svar_set* s, const char* const* displace, size_t n_displac
         Entry* e = outputs(s)[k].e;
         if (mine(e)) continue;  // claiming again re-asserts only what another took
         std::memcpy(e->writer_name, s->owner, kNameLen);  // the name before the token: info reads both
+        e->since_lo.store(std::uint32_t(since), Rel);
+        e->since_hi.store(std::uint32_t(since >> 32), Rel);
         e->writer_id.store(s->id, Rel);
         e->writer_token.store(s->a->token, Rel);
     }
@@ -304,6 +306,49 @@ int chm_svar_set_claim(chm_svar_set_t* set, const char* const* displace, size_t 
         r = (bp::set_error("chm_svar_set_claim %s: its backplane attachment is gone", set->owner), -ENOTCONN);
     else r = claim_outputs(set, displace, n_displace);
     return chm::ipc::leave(r, "chm_svar_set_claim");
+}
+
+int chm_svar_set_claim_at(chm_svar_set_t* set, const char* const* displace, size_t n_displace, uint64_t at_ns) {
+    int r;
+    if (!set || (n_displace && !displace)) r = (bp::set_error("chm_svar_set_claim_at: NULL set or names"), -EINVAL);
+    else if (!same_attachment(set))
+        r = (bp::set_error("chm_svar_set_claim_at %s: its backplane attachment is gone", set->owner), -ENOTCONN);
+    else r = claim_outputs(set, displace, n_displace, at_ns);
+    return chm::ipc::leave(r, "chm_svar_set_claim_at");
+}
+
+int chm_svar_set_check_claim(chm_svar_set_t* set, const char* const* displace, size_t n_displace) {
+    int r = 0;
+    if (!set || (n_displace && !displace)) r = (bp::set_error("chm_svar_set_check_claim: NULL set or names"), -EINVAL);
+    else if (!same_attachment(set))
+        r = (bp::set_error("chm_svar_set_check_claim %s: its backplane attachment is gone", set->owner), -ENOTCONN);
+    else if ((r = lock(set->table)) == 0) {
+        for (std::uint32_t k = 0; k < set->n_out && r == 0; ++k) {
+            const Entry* e = outputs(set)[k].e;
+            const bool mine = e->writer_token.load(Acq) == set->a->token && e->writer_id.load(Acq) == set->id;
+            if (mine || !claim_live(set->table, e) || displaceable(e, displace, n_displace)) continue;
+            char other[kNameLen];
+            std::memcpy(other, e->writer_name, kNameLen);
+            other[kNameLen - 1] = 0;
+            bp::set_error("%s: state variable %s is written by %s already: one writer per variable", set->owner,
+                          outputs(set)[k].name, other);
+            r = -EBUSY;
+        }
+        unlock(set->table);
+    }
+    return chm::ipc::leave(r, "chm_svar_set_check_claim");
+}
+
+int chm_svar_set_displaced(const chm_svar_set_t* set, uint64_t release_ns) {
+    if (!set || !set->claims_held.load(std::memory_order_relaxed)) return 0;
+    for (std::uint32_t k = 0; k < set->n_out; ++k) {
+        const Entry* e = set->vars[set->n_in + k].e;
+        if (e->writer_token.load(Acq) == set->a->token && e->writer_id.load(Acq) == set->id) continue;
+        // Taken: by whom and since when is written before the token.
+        const std::uint64_t since = std::uint64_t(e->since_hi.load(Acq)) << 32 | e->since_lo.load(Acq);
+        if (since <= release_ns) return 1;
+    }
+    return 0;
 }
 
 int chm_svar_set_release(chm_svar_set_t* set) {

@@ -34,7 +34,7 @@ using bp::A32;
 
 inline constexpr char kTableName[] = "chimera.svar";
 inline constexpr std::uint32_t kTableMagic = 0x53564152;  // "SVAR"
-inline constexpr std::uint32_t kTableVersion = 1;
+inline constexpr std::uint32_t kTableVersion = 2;  // 2: the claim's hand-over instant
 inline constexpr std::uint32_t kNameLen = 32;  // name and writer name, NUL included
 inline constexpr std::uint32_t kUnitLen = 16;
 inline constexpr std::uint32_t kElemsMax = 65536;
@@ -69,10 +69,15 @@ struct Entry {
     char name[kNameLen];
     char unit[kUnitLen];
     char writer_name[kNameLen];  // the writing set's owner (written before the token)
+    // The instant from which the claim holds (a switch's T; 0: at once),
+    // in two words written before the token: the writer it displaced
+    // writes the cycles released before it and stops at the first after.
+    A32 since_lo, since_hi;
+    std::uint32_t reserved[6];
 };
 
 static_assert(bp::kShared<TableHeader> && sizeof(TableHeader) == 64);
-static_assert(bp::kShared<Entry> && sizeof(Entry) == 128);
+static_assert(bp::kShared<Entry> && sizeof(Entry) == 160);
 static_assert(offsetof(Entry, name) == 48);
 
 inline constexpr std::uint32_t kTableBytesMin = sizeof(TableHeader) + sizeof(Entry);
