@@ -307,3 +307,91 @@ TEST_F(Servo, EverySwitchedCycleHasExactlyOneWriter) {
 }
 
 }  // namespace
+
+namespace {
+
+// A system from its configuration file: declared, spawned, started.
+TEST_F(Servo, ASystemRunsFromItsConfigurationFile) {
+    chm_servo_system_t* sys = nullptr;
+    ASSERT_EQ(chm_servo_system_open(SYSTEM_TOML, &sys), 0) << chm_servo_system_last_error();
+    EXPECT_EQ(chm_servo_system_modules(sys), 3u);
+    ASSERT_EQ(chm_servo_system_declare(sys), 0) << chm_servo_system_last_error();
+    ASSERT_EQ(chm_servo_system_spawn(sys), 0) << chm_servo_system_last_error();
+    std::uint64_t at = 0;
+    ASSERT_EQ(chm_servo_system_start(sys, &at), 0) << chm_servo_system_last_error();
+    EXPECT_EQ(at % (4 * kMs), 0u) << "500 Hz and 250 Hz: a common boundary every 4 ms";
+    chm_servo_module_t c1, c2, f;
+    ASSERT_EQ(chm_servo_system_find(sys, "c1", &c1), 0);
+    ASSERT_EQ(chm_servo_system_find(sys, "c2", &c2), 0);
+    ASSERT_EQ(chm_servo_system_find(sys, "f", &f), 0);
+    EXPECT_EQ(status(c1).state, CHM_SERVO_ON);
+    EXPECT_EQ(status(c2).state, CHM_SERVO_OFF);
+    EXPECT_EQ(status(f).state, CHM_SERVO_ON);
+    EXPECT_EQ(status(f).period_ns, 4 * kMs);
+    const std::uint64_t end = now_ms() + 5000;
+    while (status(c1).cycles < 10 && now_ms() < end) nap_ms(2);
+    EXPECT_EQ(std::fmod(get("v"), 1000.0), 4.0) << "c1's parameter from the file";
+    chm_svar_info_t i;
+    ASSERT_EQ(chm_svar_info("reach", &i), 0);
+    EXPECT_STREQ(i.unit, "m");
+    EXPECT_EQ(i.type, CHM_SVAR_FLOAT);
+    EXPECT_EQ(i.rows, 2u);
+    chm_servo_system_close(sys);
+    // The plan of the same file: bytes per cycle and per second.
+    const Outcome o = run({CHIMERA_BIN, "svar", "plan", SYSTEM_TOML});
+    EXPECT_EQ(o.status, 0) << o.err;
+    EXPECT_NE(o.out.find("c1                   counter             1       500          0          8         4000  yes"),
+              std::string::npos) << o.out;
+    EXPECT_NE(o.out.find("modules on at start: 6000 B/s; every module on at once: 10000 B/s"), std::string::npos)
+        << o.out;
+}
+
+TEST_F(Servo, ConfigurationErrorsNameTheirPlace) {
+    struct Case {
+        const char* text;
+        const char* expect;
+    };
+    const Case cases[] = {
+        {"[[svar]]\nname = \"v\"\ntype = \"double\"\nrowz = 3\n", ":4:1: unknown key 'rowz' in table 'svar[0]'"},
+        {"[[svar]]\nname = \"v\"\ntype = \"complex\"\n", ":3:8: svar[0].type"},
+        {"[[module]]\nname = \"m\"\npath = \"x.so\"\nrtpu = 1\nrate_hz = 0\n", ":5:11: module[0].rate_hz"},
+        {"[[module]]\nname = \"m\"\npath = \"x.so\"\nrate_hz = 10\n", "module[0].rtpu"},
+        {"[[svar]]\nname = \"v\"\ntype = \"double\"\n[[svar]]\nname = \"v\"\ntype = \"float\"\n",
+         ":5:8: svar[1].name: v is declared twice"},
+        {"[[module]]\nname = \"m\"\npath = \"x.so\"\nrtpu = 1\nrate_hz = 10\nparams = 3\n", ":6:10: module[0].params"},
+        {"x = [1, 2\n", ":1:"},
+    };
+    for (const Case& c : cases) {
+        SCOPED_TRACE(c.text);
+        const std::string file = dir_ + "/bad.toml";
+        FILE* fp = std::fopen(file.c_str(), "w");
+        ASSERT_NE(fp, nullptr);
+        std::fputs(c.text, fp);
+        std::fclose(fp);
+        chm_servo_system_t* sys = nullptr;
+        EXPECT_NE(chm_servo_system_open(file.c_str(), &sys), 0);
+        const std::string err = chm_servo_system_last_error();
+        EXPECT_NE(err.find("bad.toml"), std::string::npos) << err;
+        EXPECT_NE(err.find(c.expect), std::string::npos) << err;
+    }
+    // Found by the plan, which reads the descriptors: two writers on at
+    // start, and a variable the file does not declare.
+    std::string text = std::string("[[svar]]\nname = \"v\"\ntype = \"double\"\n") +
+                       "[[module]]\nname = \"a\"\npath = \"" COUNTER_SO "\"\nrtpu = 1\nrate_hz = 100\non = true\n" +
+                       "[[module]]\nname = \"b\"\npath = \"" COUNTER_SO "\"\nrtpu = 2\nrate_hz = 100\non = true\n";
+    const std::string file = dir_ + "/two.toml";
+    FILE* fp = std::fopen(file.c_str(), "w");
+    std::fputs(text.c_str(), fp);
+    std::fclose(fp);
+    Outcome o = run({CHIMERA_BIN, "svar", "plan", file});
+    EXPECT_EQ(o.status, 2);
+    EXPECT_NE(o.err.find("state variable v is written by both a and b, switched on at start"), std::string::npos) << o.err;
+    fp = std::fopen(file.c_str(), "w");
+    std::fputs("[[module]]\nname = \"a\"\npath = \"" COUNTER_SO "\"\nrtpu = 1\nrate_hz = 100\n", fp);
+    std::fclose(fp);
+    o = run({CHIMERA_BIN, "svar", "plan", file});
+    EXPECT_EQ(o.status, 2);
+    EXPECT_NE(o.err.find("module a uses state variable v, which the file does not declare"), std::string::npos) << o.err;
+}
+
+}  // namespace

@@ -33,6 +33,8 @@ int cmd_stop(const Options& o);
 int cmd_rm(const Options& o);
 // `chimera svar SUBCOMMAND ARGS...` (svar.cpp); `args` starts with the subcommand.
 int cmd_svar(const Options& o, const std::vector<const char*>& args);
+// `chimera svar plan CONFIG` (plan.cpp): needs no backplane.
+int cmd_svar_plan(const char* config);
 
 // Stop every RTPU of the attached backplane: SIGTERM, wait up to
 // timeout_s, SIGKILL the rest. Prints one line per RTPU unless quiet.

@@ -52,7 +52,7 @@ void usage(FILE* f) {
         "       chimera rm     [--backplane PATH] [--force]\n"
         "       chimera path   [--backplane PATH]\n"
         "       chimera svar   [--backplane PATH] list | get NAME | set NAME V... |\n"
-        "                      declare NAME TYPE RxC [UNIT]\n"
+        "                      declare NAME TYPE RxC [UNIT] | plan CONFIG\n"
         "\n"
         "start   create the backplane PATH if absent (default $%s, else\n"
         "        backplane.bp in $XDG_RUNTIME_DIR/chimera or /dev/shm/chimera-<uid>,\n"
@@ -76,7 +76,9 @@ void usage(FILE* f) {
         "svar    the state-variable table: list every variable with its writer and\n"
         "        value, get one, set a set-point (refused while a module writes it),\n"
         "        or declare one (TYPE double, float, int32, uint32 or bool; shape\n"
-        "        RxC, 6x1 for a vector of 6)\n",
+        "        RxC, 6x1 for a vector of 6); plan CONFIG prints the bytes each\n"
+        "        module of a system's configuration file copies per cycle and per\n"
+        "        second, per RTPU and in all (see chimera/servo.h, \"Systems\")\n",
         CHM_BP_ENV);
 }
 

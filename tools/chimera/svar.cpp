@@ -4,6 +4,7 @@
 //   get NAME                      one variable's value, every element
 //   set NAME V...                 write a set-point (refused while another writer has it)
 //   declare NAME TYPE RxC [UNIT]  declare a variable (TYPE: double float int32 uint32 bool)
+//   plan CONFIG                   bytes per cycle and per second of a system's modules (plan.cpp)
 #include <cerrno>
 #include <cinttypes>
 #include <cstdio>
@@ -160,9 +161,16 @@ int cmd_svar(const Options& o, const std::vector<const char*>& args) {
     }
     const std::string sub = args[0];
     const std::vector<const char*> rest(args.begin() + 1, args.end());
-    if (sub != "list" && sub != "get" && sub != "set" && sub != "declare") {
-        say("svar: unknown subcommand \"%s\" (list, get, set or declare)", sub.c_str());
+    if (sub != "list" && sub != "get" && sub != "set" && sub != "declare" && sub != "plan") {
+        say("svar: unknown subcommand \"%s\" (list, get, set, declare or plan)", sub.c_str());
         return 2;
+    }
+    if (sub == "plan") {
+        if (rest.size() != 1) {
+            say("svar plan wants one configuration file");
+            return 2;
+        }
+        return cmd_svar_plan(rest[0]);  // no backplane needed
     }
     if ((sub == "list" && !rest.empty()) || (sub == "get" && rest.size() != 1) || (sub == "set" && rest.size() < 2)) {
         say("svar %s: wrong arguments (svar list | get NAME | set NAME V... | declare NAME TYPE RxC [UNIT])",

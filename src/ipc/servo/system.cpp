@@ -95,7 +95,7 @@ int read_vars(const chm_config_t* c, chm_servo_system* s) {
         v.cols = std::uint32_t(cols);
         for (const auto& w : s->vars)
             if (w.name == v.name)
-                return from_config(chm_config_error(c, key("svar", i, "name").c_str(), "%s is declared twice", buf));
+                return from_config(chm_config_error(c, key("svar", i, "name").c_str(), "%s is declared twice", v.name.c_str()));
         s->vars.push_back(v);
     }
     return 0;
