@@ -129,6 +129,13 @@ constexpr RowInfo kRows[] = {
      "copy-in + copy-out of a 64-double input and a 64-double output (1 KiB in all)"},
     {"svar_copy_in_out_1024d", "ns", "peer_memcpy_16kib", kNull, {Target::kRatioPlusAtMost, 1.5, 100},
      "copy-in + copy-out of a 1024-double input and a 1024-double output (16 KiB in all)"},
+    // ---- servo task control (issue 18), real chimera-rtpu processes
+    {"module_cycle_cpu", "ns", "peer_task_cycle_cpu", kNull, ratio_le(2),
+     "CPU of one cycle of an empty module (copy-in, copy-out of one double) at 1 kHz"},
+    {"servo_switch_4_modules_periods", "x", nullptr, kNull, {Target::kValueAtMost, 2},
+     "a switch of 4 modules on 2 RTPUs: call to effect, in periods of the slowest module"},
+    {"module_spawn", "ns", "task_spawn_run_exit", kNull, none,
+     "spawn a module on an RTPU from a host (load, checks, init in a task)"},
     // ---- the matrix library (issue 18 item 5), at a control loop's size
     {"mat_mul_6x6", "ns", "peer_eigen_mul_6x6", kNull, none,
      "chm_mat_mul of two 6x6 views into a third"},
@@ -252,6 +259,8 @@ constexpr RowInfo kRows[] = {
     {"peer_array_write", "ns", nullptr, kNull, none, "fill of a 64 KiB local array, per 8-byte word"},
     {"peer_memcpy_1kib", "ns", nullptr, kNull, none, "memcpy of 512 B, twice (1 KiB in all), cache-resident"},
     {"peer_memcpy_16kib", "ns", nullptr, kNull, none, "memcpy of 8 KiB, twice (16 KiB in all), cache-resident"},
+    {"peer_task_cycle_cpu", "ns", nullptr, kNull, none,
+     "CPU of one cycle of a periodic task that does nothing, 1 kHz, on an RTPU"},
     // ---- peers: matrix arithmetic
     {"peer_eigen_mul_6x6", "ns", nullptr, kNull, none,
      "Eigen fixed-size 6x6 product, c.noalias() = a * b"},

@@ -30,7 +30,7 @@ extern "C" {
 typedef struct chm_bp_config {
     uint32_t rtpu_slots;        /* 2..32; slot 0 is the host server (default 32) */
     uint32_t ring_records;      /* express-mail records per RTPU (1..4096, default 64) */
-    uint32_t ring_record_size;  /* bytes per record, multiple of 16 (16..65536, default 256) */
+    uint32_t ring_record_size;  /* bytes per record, multiple of 16 (16..65536, default 1024) */
     uint32_t local_window_size; /* each RTPU's local memory, multiple of 4096 (default 256 KiB) */
     uint32_t common_size;       /* common memory, multiple of 4096, >= 4096 (default 8 MiB) */
     uint32_t registry_capacity; /* named objects (1..65536, default 256) */

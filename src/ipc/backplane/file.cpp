@@ -247,7 +247,7 @@ void chm_bp_config_init(chm_bp_config_t* cfg) {
     if (!cfg) return;
     cfg->rtpu_slots = 32;
     cfg->ring_records = 64;
-    cfg->ring_record_size = 256;
+    cfg->ring_record_size = 1024;  // a servo request (module spawn, switch) needs up to ~900
     cfg->local_window_size = 256u << 10;
     cfg->common_size = 8u << 20;
     cfg->registry_capacity = 256;
