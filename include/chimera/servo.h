@@ -98,8 +98,9 @@ int chm_servo_release(uint32_t rtpus);
 
 /* Load the module `s->path` on RTPU `s->rtpu` as instance `s->name`, check
  * its descriptor, set its parameters, open its state variables and run its
- * init: it is then OFF. Errors: -EINVAL bad request (period 0, deadline
- * above the period, NULL path or name); -ENAMETOOLONG; -EPERM the caller
+ * init: it is then OFF. Errors: -EINVAL bad request (period 0 or below
+ * 100 us, the fastest an RTPU runs a module; deadline above the period;
+ * NULL path or name); -ENAMETOOLONG; -EPERM the caller
  * does not control that RTPU; -EACCES the path is not trusted (see
  * chimera/program.h); -ENOEXEC not a loadable module, no descriptor,
  * another ABI, a missing entry point; -ENOENT a state variable it names is
@@ -172,7 +173,7 @@ const char* chm_servo_last_error(void);
  *     name = "joint_pd"       # instance name, unique on its RTPU
  *     path = "libjoint_pd.so" # relative: to the configuration file's directory
  *     rtpu = 1
- *     rate_hz = 500           # 0.01 .. 100000; the period is 1/rate, in whole ns
+ *     rate_hz = 500           # 0.01 .. 10000; the period is 1/rate, in whole ns
  *     deadline_ms = 2         # optional: relative deadline (default the period)
  *     wcet_us = 300           # optional: estimated CPU per cycle (MLF, MUF)
  *     critical = true         # optional: MUF critical set (default false)

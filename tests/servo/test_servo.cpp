@@ -147,6 +147,9 @@ TEST_F(Servo, BadModulesAndRequestsAreRefusedByName) {
     EXPECT_EQ(spawn(1, MALFORMED_NOVAR_SO, "bad", 2 * kMs, &m), -ENOENT);
     EXPECT_NE(std::string(chm_servo_last_error()).find("not_declared"), std::string::npos) << chm_servo_last_error();
     EXPECT_EQ(spawn(1, COUNTER_SO, "c", 0, &m), -EINVAL) << "period 0";
+    EXPECT_EQ(spawn(1, COUNTER_SO, "c", 20'000, &m), -EINVAL) << "50 kHz";
+    EXPECT_NE(std::string(chm_servo_last_error()).find("at most every 100000 ns"), std::string::npos)
+        << chm_servo_last_error();
     EXPECT_EQ(spawn(1, COUNTER_SO, "c", 2 * kMs, &m, {{"id", 500}}), -ERANGE);
     EXPECT_EQ(spawn(1, COUNTER_SO, "c", 2 * kMs, &m, {{"gain", 1}}), -ESRCH);
     EXPECT_EQ(spawn(1, "/nonexistent/module.so", "c", 2 * kMs, &m), -ENOENT);

@@ -56,6 +56,12 @@ int do_spawn(const char* req, std::uint32_t len, Reply& out, char* why, std::siz
                              (unsigned long long)q.period_ns, (unsigned long long)q.deadline_ns,
                              (unsigned long long)q.wcet_ns),
                -EINVAL;
+    // Every release is a timer expiry: on a host of this kind one costs
+    // ~50 us, so a shorter period is beyond what the RTPU can run.
+    if (q.period_ns < kMinPeriodNs)
+        return std::snprintf(why, wn, "period %llu ns: this RTPU releases cycles at most every %llu ns (%.0f Hz)",
+                             (unsigned long long)q.period_ns, (unsigned long long)kMinPeriodNs, 1e9 / kMinPeriodNs),
+               -EINVAL;
     Ref ref{};
     const int r = spawn(q, params, path, &ref, why, wn);
     if (r == 0) out.put(ref);

@@ -29,6 +29,7 @@ enum Op : std::uint32_t {
 inline constexpr std::uint32_t kNameLen = 32;
 inline constexpr std::uint32_t kSwitchMax = 16;  // modules of one switch on one RTPU
 inline constexpr std::uint32_t kDisplaceMax = 32;
+inline constexpr std::uint64_t kMinPeriodNs = 100'000;  // 10 kHz: the fastest module an RTPU runs
 
 struct Ref {
     std::int32_t index;

@@ -125,7 +125,7 @@ int read_module(const chm_config_t* c, chm_servo_system* s, std::size_t i) {
     int critical = 0, on = 0;
     std::size_t miss = 0;
     if (int r = chm_config_require_int64(c, key("module", i, "rtpu").c_str(), 1, 31, &rtpu)) return from_config(r);
-    if (int r = chm_config_require_double(c, key("module", i, "rate_hz").c_str(), 0.01, 100000, &rate))
+    if (int r = chm_config_require_double(c, key("module", i, "rate_hz").c_str(), 0.01, 10000, &rate))
         return from_config(r);
     const std::uint64_t period = std::uint64_t(std::llround(1e9 / rate));
     if (int r = chm_config_get_double(c, key("module", i, "deadline_ms").c_str(), 0, 0, double(period) / 1e6,
