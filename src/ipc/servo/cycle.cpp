@@ -61,12 +61,12 @@ void cycle_task(void* arg) {
     bool first = true;
     for (;;) {
         const std::uint64_t r = chm_task_cycle_release();
-        const std::uint64_t off = m->off_at.load(std::memory_order_acquire);
+        const std::uint64_t off = m->off_at();
         if (off && r >= off) break;
         // Handed over: a module switched on at T took an output, so this
         // cycle (released at or after T) is the new writer's.
         if (chm_svar_set_displaced(m->set, r)) {
-            m->off_at.store(r);
+            m->arm_off(r);
             break;
         }
         if (first) m->switched_at = r, first = false;
@@ -89,7 +89,7 @@ void cycle_task(void* arg) {
     }
     // Switched off at the first release at or after off_at: this cycle and
     // every later one belong to the module that took over.
-    m->switched_at = m->off_at.load();
+    m->switched_at = m->off_at();
     m->cycle_done = true;
     if (m->desc->off(m) != 0) {
         set_last_error(m, "off failed");
@@ -97,7 +97,7 @@ void cycle_task(void* arg) {
         return;
     }
     chm_svar_set_release(m->set);
-    m->off_at.store(0);
+    m->arm_off(0);
     m->state.store(CHM_SERVO_OFF);
 }
 
@@ -140,7 +140,7 @@ void reap_cycle_task(chm_module* m) {
 
 void stop_cycle_task(chm_module* m) {
     if (m->cycle_task == CHM_TID_NONE) return;
-    m->off_at.store(1);  // every release is at or after 1
+    m->arm_off(1);  // every release is at or after 1
     if (chm_task_join(m->cycle_task, kStopWaitNs, nullptr) == -ETIMEDOUT) {
         chm_task_destroy(m->cycle_task);
         chm_task_join(m->cycle_task, CHM_NO_WAIT, nullptr);
@@ -148,7 +148,7 @@ void stop_cycle_task(chm_module* m) {
     }
     m->cycle_task = CHM_TID_NONE;
     chm_svar_set_release(m->set);
-    m->off_at.store(0);
+    m->arm_off(0);
     if (m->state.load() == CHM_SERVO_ON) m->state.store(CHM_SERVO_OFF);
 }
 
@@ -160,7 +160,7 @@ int prepare(const Item* items, std::uint32_t count, const char* const* displace,
         const int st = m->state.load();
         if (items[i].on && st != CHM_SERVO_OFF)
             return std::snprintf(why, n, "%s is not OFF (state %d): cannot go on", m->name, st), -EALREADY;
-        if (!items[i].on && (st != CHM_SERVO_ON || m->off_at.load()))
+        if (!items[i].on && (st != CHM_SERVO_ON || m->off_at()))
             return std::snprintf(why, n, "%s is not ON: cannot go off", m->name), -EALREADY;
         if (items[i].on && m->cycle_task != CHM_TID_NONE)
             return std::snprintf(why, n, "%s is still finishing its last cycle", m->name), -EALREADY;
@@ -195,7 +195,7 @@ int commit(std::uint64_t at, const Item* items, std::uint32_t count, const char*
     if (!any_on) {
         // Only modules going off alone: each stops at its first release at
         // or after T (at once when this commit comes later than T).
-        for (std::uint32_t i = 0; i < count; ++i) items[i].m->off_at.store(at, std::memory_order_release);
+        for (std::uint32_t i = 0; i < count; ++i) items[i].m->arm_off(at);
         return 0;
     }
     // `on` runs first for every module going on; a failure undoes the
@@ -240,7 +240,7 @@ int commit(std::uint64_t at, const Item* items, std::uint32_t count, const char*
     // if the module taking them was committed in time, else never): the
     // variable is never without a writer. The others stop at T.
     for (std::uint32_t i = 0; i < count; ++i)
-        if (!items[i].on && !items[i].handed) items[i].m->off_at.store(at, std::memory_order_release);
+        if (!items[i].on && !items[i].handed) items[i].m->arm_off(at);
     return 0;
 }
 
@@ -270,7 +270,7 @@ int cancel(std::uint64_t at, const Item* items, std::uint32_t count, const char*
     for (std::uint32_t i = 0; i < count; ++i) {
         chm_module* m = items[i].m;
         if (items[i].on) continue;
-        if (m->off_at.load() == at) m->off_at.store(0);
+        if (m->off_at() == at) m->arm_off(0);
         chm_svar_set_claim(m->set, displace, n_displace);
     }
     return 0;

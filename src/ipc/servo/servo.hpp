@@ -112,7 +112,18 @@ struct chm_module {
     std::uint64_t period_ns = 0, deadline_ns = 0, wcet_ns = 0;
     int critical = 0, priority = 0, miss_policy = 0;
     std::atomic<int> state{CHM_SERVO_NONE};
-    std::atomic<std::uint64_t> off_at{0};   // the cycle task stops at its first release >= this
+    // The cycle task stops at its first release >= the armed instant. Two
+    // words, not a 64-bit atomic (m68k has none lock-free): the instant is
+    // written while the flag is clear, and read only when it is set.
+    std::atomic<std::uint32_t> off_armed{0};
+    std::uint64_t off_time = 0;
+    void arm_off(std::uint64_t t) {
+        off_armed.store(0, std::memory_order_relaxed);
+        std::atomic_signal_fence(std::memory_order_seq_cst);
+        off_time = t;
+        if (t) off_armed.store(1, std::memory_order_release);
+    }
+    std::uint64_t off_at() const { return off_armed.load(std::memory_order_acquire) ? off_time : 0; }
     std::uint64_t on_at = 0;                // committed first release
     chm_tid_t cycle_task = CHM_TID_NONE;
     bool cycle_done = false;                // the cycle task left its loop itself
