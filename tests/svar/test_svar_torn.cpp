@@ -27,7 +27,7 @@ constexpr std::uint64_t kMs = 1'000'000;
 struct Board {
     std::atomic<std::uint32_t> stop;
     std::atomic<std::uint32_t> readers_done;
-    std::atomic<std::uint64_t> reads[2], torn[2], backwards[2], distinct[2], writes;
+    std::atomic<std::uint32_t> reads[2], torn[2], backwards[2], distinct[2], writes;  // 32-bit: m68k has no 64-bit atomics
 };
 
 Board* board() {
@@ -53,7 +53,7 @@ void writer(void*) {
         for (int k = 0; k < kElems; ++k) v[k] = double(n);
         chm_svar_set_write(s);
     }
-    b->writes.store(n);
+    b->writes.store(std::uint32_t(n));
     chm_svar_set_destroy(s);
     chm_kernel_stop(0);
 }
@@ -78,10 +78,10 @@ void reader(void*) {
         distinct += v[0] != last;
         last = v[0];
     }
-    b->reads[g_reader] = reads;
-    b->torn[g_reader] = torn;
-    b->backwards[g_reader] = backwards;
-    b->distinct[g_reader] = distinct;
+    b->reads[g_reader] = std::uint32_t(reads);
+    b->torn[g_reader] = std::uint32_t(torn);
+    b->backwards[g_reader] = std::uint32_t(backwards);
+    b->distinct[g_reader] = std::uint32_t(distinct);
     if (b->readers_done.fetch_add(1) + 1 == 2) b->stop.store(1);
     chm_svar_set_destroy(s);
     chm_kernel_stop(0);
