@@ -65,9 +65,15 @@ monitor_rc=$?
 monitor_pid=
 demo_logs
 echo
+# The first python3 with matplotlib (a python3 first in PATH, e.g. a
+# pyenv one, may lack Debian's python3-matplotlib).
+py=
+for p in python3 /usr/bin/python3; do
+    if "$p" -c 'import matplotlib' 2>/dev/null; then py=$p; break; fi
+done
 if [ -s "$CSV" ]; then
-    if python3 -c 'import matplotlib' 2>/dev/null; then
-        python3 "$HERE/plot.py" "$CSV" "$PLOT" && echo "== plot of the joints and the contact force: $PLOT"
+    if [ -n "$py" ]; then
+        "$py" "$HERE/plot.py" "$CSV" "$PLOT" && echo "== plot of the joints and the contact force: $PLOT"
     else
         echo "== no plot made: python3-matplotlib is not installed (apt-get install python3-matplotlib)"
     fi

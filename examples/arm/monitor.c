@@ -31,7 +31,7 @@ static void nap_ms(int ms) {
 }
 
 typedef struct {
-    double q[2], q_ref[2], f[2], grip[2], obj[3];
+    double q[2], q_ref[2], f[2], grip[2], obj[3], t_arm;
     int32_t phase;
     double sw[DEMO_SW_MAX * 4];
 } sample_t;
@@ -39,7 +39,8 @@ typedef struct {
 static int take(sample_t* s) {
     return chm_svar_get(SV_Q, s->q, sizeof s->q) | chm_svar_get(SV_Q_REF, s->q_ref, sizeof s->q_ref) |
            chm_svar_get(SV_F, s->f, sizeof s->f) | chm_svar_get(SV_GRIP, s->grip, sizeof s->grip) |
-           chm_svar_get(SV_OBJ, s->obj, sizeof s->obj) | chm_svar_get(SV_PHASE, &s->phase, sizeof s->phase) |
+           chm_svar_get(SV_OBJ, s->obj, sizeof s->obj) | chm_svar_get(SV_T, &s->t_arm, sizeof s->t_arm) |
+           chm_svar_get(SV_PHASE, &s->phase, sizeof s->phase) |
            chm_svar_get(SV_SWITCHES, s->sw, sizeof s->sw);
 }
 
@@ -111,7 +112,7 @@ int main(int argc, char** argv) {
             continue;
         }
         const double t = (double)(now_ns() - t0) * 1e-9;
-        if (csv)
+        if (csv && s.t_arm > 0) /* not before the arm's first sample: all zeros */
             fprintf(csv, "%.4f,%.6f,%.6f,%.6f,%.6f,%.3f,%.3f,%.5f,%.3f,%.5f,%.5f,%.0f,%d\n", t, s.q[0], s.q[1],
                     s.q_ref[0], s.q_ref[1], s.f[0], s.f[1], s.grip[0], s.grip[1], s.obj[0], s.obj[1], s.obj[2],
                     (int)s.phase);
