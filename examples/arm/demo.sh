@@ -60,6 +60,11 @@ echo "== chimera-arm-monitor (figures once a second) and chimera-arm-job (the ph
 monitor_pid=$!
 "$ARM/chimera-arm-job" --modules "$ARM" --tolerance "${DEMO_TOLERANCE:-0.015}"
 job_rc=$?
+# The monitor ends when the job publishes its end; a job that failed
+# before it could must not leave the monitor waiting: 3 s, then it goes.
+n=0
+while kill -0 "$monitor_pid" 2>/dev/null && [ "$n" -lt 30 ]; do sleep 0.1; n=$((n + 1)); done
+kill "$monitor_pid" 2>/dev/null
 wait "$monitor_pid"
 monitor_rc=$?
 monitor_pid=
