@@ -11,6 +11,7 @@
 # and no critical deadline was missed (the job says which failed).
 #   DEMO_PLOT       where the plot goes (default: arm-demo.png here)
 #   DEMO_TOLERANCE  placement tolerance in m (default 0.015)
+#   DEMO_PERIOD_MS  the modules' base period (default 2; the gripper runs at 5x)
 #   DEMO_RTPU_OPTIONS  as for the loop demo (default: SCHED_FIFO 50 when allowed)
 #
 # usage: demo.sh [BUILD_DIR]   (default: build)
@@ -58,7 +59,7 @@ echo
 echo "== chimera-arm-monitor (figures once a second) and chimera-arm-job (the phases and switches)"
 "$ARM/chimera-arm-monitor" --seconds 90 --csv "$CSV" &
 monitor_pid=$!
-"$ARM/chimera-arm-job" --modules "$ARM" --tolerance "${DEMO_TOLERANCE:-0.015}"
+"$ARM/chimera-arm-job" --modules "$ARM" --tolerance "${DEMO_TOLERANCE:-0.015}" --period-ms "${DEMO_PERIOD_MS:-2}"
 job_rc=$?
 # The monitor ends when the job publishes its end; a job that failed
 # before it could must not leave the monitor waiting: 3 s, then it goes.
