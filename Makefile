@@ -18,7 +18,7 @@ PKGS_BENCH = libbenchmark-dev rt-tests python3-matplotlib
 PKGS_FUZZ  = clang libclang-rt-14-dev
 FUZZ_TARGETS = fuzz_backplane fuzz_msgq fuzz_xmail fuzz_args fuzz_config fuzz_servo
 
-.PHONY: all deps deps-cross deps-bench deps-fuzz build demo demo-multi stress test test-native test-m68k \
+.PHONY: all deps deps-cross deps-bench deps-fuzz build demo demo-loop demo-multi stress test test-native test-m68k \
         test-aarch64 test-fuzz fuzz fuzz-seeds bench clean
 
 all: build
@@ -41,11 +41,18 @@ $(BUILD)/build.ninja:
 build: deps $(BUILD)/build.ninja
 	meson compile -C $(BUILD)
 
-# A control loop closed across two RTPUs on the default backplane (in the
-# user's own directory: `chimera path`),
-# its figures printed by a host process once a second for ~10 s; stops and
-# removes everything at the end or on Ctrl-C (examples/loop/demo.sh).
+# The pick-and-place arm on the default backplane (in the user's own
+# directory: `chimera path`): control modules on two RTPUs switched live per
+# phase by a job program, figures printed once a second, a PNG plot at the
+# end (arm-demo.png; needs python3-matplotlib); checks that the object was
+# placed within tolerance and no critical deadline was missed; stops and
+# removes everything at the end or on Ctrl-C (examples/arm/demo.sh).
 demo: build
+	@sh examples/arm/demo.sh $(BUILD)
+
+# A control loop closed across two RTPUs, its figures printed by a host
+# process once a second for ~10 s (examples/loop/demo.sh).
+demo-loop: build
 	@sh examples/loop/demo.sh $(BUILD)
 
 # Three RTPUs sharing memory, a spin-lock, a remote semaphore and express

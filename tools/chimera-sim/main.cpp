@@ -21,10 +21,12 @@ const char* const kUsage =
     "usage: chimera-sim [--dir DIR] <device> <command> <file> [args]\n"
     "  arm create <file> [--joints N] [--clock monotonic|manual|kernel] [--dt S]\n"
     "                    [--gravity G] [--hold] [--surface Z] [--k K] [--c C] [--q0 a,b,..]\n"
+    "                    [--gripper] [--object X (needs --surface)]\n"
     "  arm get|watch <file>          state: t, q, qd, tau, tip, contact force\n"
     "  arm step <file> <steps>       integrate steps (manual clock)\n"
     "  arm torque <file> t1 [t2..]   set the amplifiers' input (N*m)\n"
     "  arm stop|resume <file>        safe stop / leave it\n"
+    "  arm grip <file> <opening>     command the gripper's opening (m)\n"
     "  ft create <file> [--arm ARMFILE] [--surface Z] [--k K] [--c C]\n"
     "  ft probe <file> x y z [vz]    move the probe (m, m/s)\n"
     "  ft get|watch <file>           wrench\n"
@@ -64,7 +66,7 @@ Opts parse(int argc, char** argv, int from) {
     for (int i = from; i < argc; ++i) {
         std::string a = argv[i];
         if (a.rfind("--", 0) == 0 && a.size() > 2 && !(a[2] >= '0' && a[2] <= '9')) {
-            const bool flag = a == "--hold";
+            const bool flag = a == "--hold" || a == "--gripper";
             o.kv.emplace_back(a.substr(2), flag || i + 1 >= argc ? "1" : argv[++i]);
         } else {
             o.pos.push_back(a);
@@ -102,7 +104,12 @@ int print_once(chm_sim_t* s, chm_sim_kind kind) {
         print_vec("tau", st.tau, n);
         print_vec("tip", st.tip, 2);
         print_vec("F", st.wrench, 3);
-        std::printf(" contact=%u stopped=%u energy=%.9g\n", st.in_contact, st.stopped, st.kinetic + st.potential);
+        std::printf(" contact=%u stopped=%u energy=%.9g", st.in_contact, st.stopped, st.kinetic + st.potential);
+        if (st.grip_cmd > 0 || st.grip_opening > 0 || st.held) {  // a gripper
+            std::printf(" grip=%.4f Fgrip=%.3f held=%u", st.grip_opening, st.grip_force, st.held);
+            print_vec("object", st.object, 2);
+        }
+        std::printf("\n");
         break;
     }
     case CHM_SIM_FT: {
@@ -182,6 +189,11 @@ int create(const std::string& dev, const char* path, const Opts& o) {
         c.contact_c = std::strtod(o.get("c", "50"), nullptr);
         const std::vector<double> q0 = numbers(o.get("q0", ""));
         for (std::size_t i = 0; i < q0.size() && i < CHM_SIM_ARM_MAX; ++i) c.q0[i] = q0[i];
+        c.gripper = o.has("gripper") || o.has("object");
+        if (o.has("object")) {
+            c.object = 1;
+            c.object_x = std::strtod(o.get("object"), nullptr);
+        }
         r = chm_sim_arm_create(path, &c);
     } else if (dev == "ft") {
         chm_sim_ft_config_t c;
@@ -266,6 +278,8 @@ int main(int argc, char** argv) {
         std::vector<double> tau;
         for (const auto& p : o.pos) tau.push_back(std::strtod(p.c_str(), nullptr));
         r = chm_sim_arm_set_torque(s, tau.data(), std::uint32_t(tau.size()));
+    } else if (kind == CHM_SIM_ARM && cmd == "grip" && o.pos.size() == 1) {
+        r = chm_sim_arm_set_grip(s, std::strtod(o.pos[0].c_str(), nullptr));
     } else if (kind == CHM_SIM_ARM && (cmd == "stop" || cmd == "resume")) {
         r = cmd == "stop" ? chm_sim_arm_stop(s) : chm_sim_arm_resume(s);
     } else if (kind == CHM_SIM_FT && cmd == "probe" && o.pos.size() >= 3) {

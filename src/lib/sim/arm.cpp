@@ -5,6 +5,9 @@
 // process, it was read. Level-1 register space (doubles, J = joints):
 //   [0, J) q (rad, RO)   [J, 2J) qd (rad/s, RO)   [2J, 3J) torque command (N*m, RW)
 //   [3J, 4J) torque acting (RO)   [4J, 4J+4) tip x, z, vx, vz (RO)
+// and with a gripper, G = 4J+4:
+//   [G] grip command (m, RW)   [G+1] opening (m)   [G+2] grip force (N)
+//   [G+3] held (0/1)   [G+4, G+6) object x, z (m)   (RO)
 #include <unistd.h>
 
 #include <cerrno>
@@ -25,8 +28,11 @@ constexpr std::uint64_t kMaxCatchUpNs = 2000000000;
 
 std::uint64_t dt_ns(const ArmFile* a) { return std::uint64_t(std::llround(a->cfg.dt_s * 1e9)); }
 
+// The model of the arm as it is now: with the object when it holds it.
+ArmModel model_of(const ArmFile* a) { return ArmModel(with_payload(a->cfg, a->st.held)); }
+
 void derive_locked(ArmFile* a) {
-    const ArmModel m(a->cfg);
+    const ArmModel m = model_of(a);
     const int n = m.joints();
     Vec q(n), qd(n);
     for (int i = 0; i < n; ++i) { q[i] = a->st.q[i]; qd[i] = a->st.qd[i]; }
@@ -41,14 +47,17 @@ void derive_locked(ArmFile* a) {
     a->st.wrench[2] = f.y();
     a->st.in_contact = a->cfg.contact && k.tip.y() < a->cfg.surface_z;
     for (int i = 0; i < n; ++i) a->st.tau[i] = a->st.stopped ? 0.0 : a->st.tau_cmd[i];
+    if (a->st.held) {  // placed by set_state: the object goes with the tip
+        a->st.object[0] = k.tip.x();
+        a->st.object[1] = k.tip.y();
+    }
 }
 
 // Integrate `steps` steps. Returns true when contact began during them.
 bool steps_locked(chm_sim_t* s, std::uint64_t steps) {
     ArmFile* a = as<ArmFile>(s);
     if (!steps) return false;
-    const ArmModel m(a->cfg);
-    const int n = m.joints();
+    const int n = int(a->cfg.joints);
     Vec q(n), qd(n), tau(n);
     for (int i = 0; i < n; ++i) {
         q[i] = a->st.q[i];
@@ -56,16 +65,23 @@ bool steps_locked(chm_sim_t* s, std::uint64_t steps) {
         tau[i] = a->st.stopped ? 0.0 : a->st.tau_cmd[i];
     }
     const bool hold = a->st.stopped && a->cfg.stop_mode == CHM_SIM_STOP_HOLD;
+    if (hold) qd.setZero();
     bool was = a->st.in_contact, began = false;
-    for (std::uint64_t k = 0; k < steps && !hold; ++k) {
-        m.step_rk4(q, qd, tau, a->cfg.dt_s);
+    const bool track = a->cfg.contact || a->cfg.gripper;
+    ArmModel::Kin kin = model_of(a).kinematics(q, qd);
+    for (std::uint64_t k = 0; k < steps; ++k) {
+        if (!hold) {
+            const ArmModel m = model_of(a);  // the payload changes when the object is taken or let go
+            m.step_rk4(q, qd, tau, a->cfg.dt_s);
+            if (track) kin = m.kinematics(q, qd);
+        }
         if (a->cfg.contact) {
-            const bool now = m.kinematics(q, qd).tip.y() < a->cfg.surface_z;
+            const bool now = kin.tip.y() < a->cfg.surface_z;
             began |= now && !was;
             was = now;
         }
+        gripper_step(a->cfg, a->st, kin.tip, kin.tip_vel, a->cfg.dt_s);
     }
-    if (hold) qd.setZero();
     for (int i = 0; i < n; ++i) { a->st.q[i] = q[i]; a->st.qd[i] = qd[i]; }
     a->st.steps += steps;
     a->st.t_ns = a->st.steps * dt_ns(a);
@@ -131,6 +147,14 @@ int set_torque_locked(chm_sim_t* s, const double* tau) {
     return 0;
 }
 
+int set_grip_locked(chm_sim_t* s, double opening) {
+    ArmFile* a = as<ArmFile>(s);
+    if (!a->cfg.gripper || std::isnan(opening)) return -EINVAL;
+    a->st.grip_cmd = opening < 0 ? 0.0 : opening > a->cfg.grip_open_max ? a->cfg.grip_open_max : opening;
+    bump(s);
+    return 0;
+}
+
 void stop_locked(chm_sim_t* s) {
     ArmFile* a = as<ArmFile>(s);
     a->st.stopped = 1;
@@ -150,7 +174,11 @@ void resume_locked(chm_sim_t* s) {
 
 // ---- driver
 
-std::uint64_t arm_range(const ArmFile* a) { return (4 * a->cfg.joints + 4) * sizeof(double); }
+constexpr std::uint32_t kGripRegs = 6;
+std::uint64_t grip_reg(const ArmFile* a) { return (4 * a->cfg.joints + 4) * sizeof(double); }
+std::uint64_t arm_range(const ArmFile* a) {
+    return (4 * a->cfg.joints + 4 + (a->cfg.gripper ? kGripRegs : 0)) * sizeof(double);
+}
 
 int arm_open(void* ctx, int flags, void** inst, std::uint64_t* range) {
     DevCtx* c = static_cast<DevCtx*>(ctx);
@@ -181,7 +209,7 @@ int arm_close(void* inst) {
 
 int64_t arm_read(void* inst, void* buf, std::size_t n, std::uint64_t off) {
     chm_sim_t* s = static_cast<Inst*>(inst)->ctx->sim;
-    double regs[4 * CHM_SIM_ARM_MAX + 4];
+    double regs[4 * CHM_SIM_ARM_MAX + 4 + kGripRegs];
     bool raise;
     std::uint64_t range;
     {
@@ -199,6 +227,9 @@ int64_t arm_read(void* inst, void* buf, std::size_t n, std::uint64_t off) {
         regs[4 * j + 1] = a->st.tip[1];
         regs[4 * j + 2] = a->st.tip_vel[0];
         regs[4 * j + 3] = a->st.tip_vel[1];
+        const double grip[kGripRegs] = {a->st.grip_cmd, a->st.grip_opening, a->st.grip_force,
+                                        double(a->st.held), a->st.object[0], a->st.object[1]};
+        std::memcpy(regs + 4 * j + 4, grip, sizeof grip);
         range = arm_range(a);
     }
     if (raise) raise_line(s);
@@ -212,7 +243,15 @@ int64_t arm_write(void* inst, const void* buf, std::size_t n, std::uint64_t off)
     Locked l(s);
     ArmFile* a = as<ArmFile>(s);
     const std::uint64_t lo = 2 * a->cfg.joints * sizeof(double), hi = 3 * a->cfg.joints * sizeof(double);
-    if (off < lo || off + n > hi) return CHM_EDEV_ACCES;  // only the torque registers are writable
+    if (a->cfg.gripper && off == grip_reg(a)) {  // the grip command alone
+        if (n != sizeof(double)) return CHM_EDEV_INVAL;
+        double v;
+        std::memcpy(&v, buf, sizeof v);
+        arm_sync_locked(s);
+        const int r = set_grip_locked(s, v);
+        return r < 0 ? CHM_EDEV_INVAL : int64_t(n);
+    }
+    if (off < lo || off + n > hi) return CHM_EDEV_ACCES;  // only the torque and grip registers are writable
     if (off % sizeof(double) || n % sizeof(double)) return CHM_EDEV_INVAL;
     double tau[CHM_SIM_ARM_MAX];
     std::memcpy(tau, a->st.tau_cmd, sizeof tau);
@@ -247,6 +286,11 @@ int arm_ioctl(void* inst, unsigned long req, void* arg) {
             auto* info = static_cast<chm_sio_info_t*>(arg);
             std::memset(info, 0, sizeof *info);
             info->n = 2 * j;
+            if (a->cfg.gripper) {  // then the jaws: opening and squeeze
+                info->n += 2;
+                sio_set(info, 2 * j, "grip", "m", 0.0, a->cfg.grip_open_max);
+                sio_set(info, 2 * j + 1, "Fgrip", "N", 0.0, a->cfg.grip_force_max);
+            }
             info->time_domain = CHM_TIME_SIM;
             char nm[16];
             for (std::uint32_t i = 0; i < j; ++i) {
@@ -266,6 +310,10 @@ int arm_ioctl(void* inst, unsigned long req, void* arg) {
                 smp->v[i] = a->st.q[i];
                 smp->v[j + i] = a->st.qd[i];
             }
+            if (a->cfg.gripper) {
+                smp->v[smp->n++] = a->st.grip_opening;
+                smp->v[smp->n++] = a->st.grip_force;
+            }
             break;
         }
         case CHM_SIO_IOC_ACT_INFO: {
@@ -278,12 +326,17 @@ int arm_ioctl(void* inst, unsigned long req, void* arg) {
                 std::snprintf(nm, sizeof nm, "tau%u", i + 1);
                 sio_set(info, i, nm, "N*m", -a->cfg.tau_max[i], a->cfg.tau_max[i]);
             }
+            if (a->cfg.gripper) {  // the grip command after the torques
+                info->n = j + 1;
+                sio_set(info, j, "grip", "m", 0.0, a->cfg.grip_open_max);
+            }
             break;
         }
         case CHM_SIO_IOC_ACT_WRITE:
             if (!(in->flags & CHM_DEV_WRITE)) { r = CHM_EDEV_ACCES; break; }
             raise = arm_sync_locked(s);
             r = set_torque_locked(s, static_cast<const double*>(arg));
+            if (r == 0 && a->cfg.gripper) r = set_grip_locked(s, static_cast<const double*>(arg)[j]);
             break;
         case CHM_SIO_IOC_ACT_STOP:
             arm_sync_locked(s);
@@ -337,6 +390,13 @@ void chm_sim_arm_config_init(chm_sim_arm_config_t* c, uint32_t joints) {
     }
     c->contact_k = 1e4;
     c->contact_c = 50.0;
+    c->grip_open_max = 0.08;
+    c->grip_speed = 0.1;
+    c->grip_force_max = 40.0;
+    c->grip_k = 2000.0;
+    c->object_mass = 0.2;
+    c->object_width = 0.04;
+    c->grasp_reach = 0.02;
 }
 
 int chm_sim_arm_create(const char* path, const chm_sim_arm_config_t* c) {
@@ -348,6 +408,11 @@ int chm_sim_arm_create(const char* path, const chm_sim_arm_config_t* c) {
               c->tau_max[i] > 0 && c->com[i] >= 0 && c->com[i] <= c->length[i]))
             return -EINVAL;
     if (c->contact && !(c->contact_k > 0 && c->contact_c >= 0)) return -EINVAL;
+    if (c->gripper && !(c->grip_open_max > 0 && c->grip_speed > 0 && c->grip_force_max > 0 && c->grip_k > 0))
+        return -EINVAL;
+    if (c->object && !(c->gripper && c->contact && std::isfinite(c->object_x) && c->object_mass > 0 &&
+                       c->object_width > 0 && c->object_width < c->grip_open_max && c->grasp_reach > 0))
+        return -EINVAL;
     ArmFile f{};
     f.cfg = *c;
     for (std::uint32_t i = 0; i < c->joints; ++i) {
@@ -356,6 +421,7 @@ int chm_sim_arm_create(const char* path, const chm_sim_arm_config_t* c) {
     }
     f.st.joints = c->joints;
     f.wall_anchor_ns = mono_ns();
+    gripper_init(f.cfg, f.st);
     derive_locked(&f);
     return file_create(path, CHM_SIM_ARM, &f, sizeof f, 2 * kPage);
 }
@@ -402,6 +468,13 @@ int chm_sim_arm_set_state(chm_sim_t* s, const double* q, const double* qd, uint3
     derive_locked(a);
     bump(s);
     return 0;
+}
+
+int chm_sim_arm_set_grip(chm_sim_t* s, double opening) {
+    if (!is_arm(s)) return -EINVAL;
+    Locked l(s);
+    if (as<ArmFile>(s)->cfg.clock == CHM_SIM_CLOCK_MONOTONIC) sync_monotonic_locked(s);
+    return set_grip_locked(s, opening);
 }
 
 int chm_sim_arm_stop(chm_sim_t* s) {

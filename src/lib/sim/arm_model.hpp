@@ -48,4 +48,16 @@ private:
     int n_;
 };
 
+// The arm's configuration with a held object: its point mass lumped into
+// the last link at the tip (mass, centre of mass and inertia about it).
+chm_sim_arm_config_t with_payload(const chm_sim_arm_config_t& c, bool held);
+
+// Gripper and object state at creation: jaws open, object on the surface.
+void gripper_init(const chm_sim_arm_config_t& c, chm_sim_arm_state_t& s);
+
+// One step of length h of the jaws and the object, the tip being at `tip`
+// moving at `tip_vel` after the arm's step. Nothing without a gripper.
+void gripper_step(const chm_sim_arm_config_t& c, chm_sim_arm_state_t& s, const V2& tip, const V2& tip_vel,
+                  double h);
+
 }  // namespace chm::sim

@@ -98,10 +98,33 @@ typedef struct chm_sim_arm_config {
     double surface_z;     /* m */
     double contact_k;     /* N/m, default 1e4 */
     double contact_c;     /* N*s/m, default 50 */
+    /* A gripper at the tip: a 1-DOF jaw whose opening moves toward its
+     * command (0..grip_open_max) at grip_speed; closed on the object it
+     * stops at object_width and squeezes it with
+     * min(grip_force_max, grip_k * (object_width - command)). */
+    int gripper;
+    double grip_open_max; /* m, default 0.08 (the jaws start fully open) */
+    double grip_speed;    /* m/s, default 0.1 */
+    double grip_force_max; /* N, default 40 */
+    double grip_k;        /* N/m, default 2000 */
+    /* An object to grasp (needs the gripper and the surface): a point mass
+     * resting on the surface at (object_x, surface_z). Closing jaws take it
+     * when it lies within grasp_reach of the tip as they pass its width; it
+     * is held while the squeeze carries its weight (friction 0.5 on each
+     * jaw: grip force >= mass * gravity), moving with the tip (its mass
+     * added at the tip, so the arm feels it); released (jaws opened to its
+     * width, or a squeeze too weak) it falls straight down onto the
+     * surface. */
+    int object;
+    double object_x;      /* m */
+    double object_mass;   /* kg, default 0.2 */
+    double object_width;  /* m, default 0.04 (< grip_open_max) */
+    double grasp_reach;   /* m, default 0.02 */
 } chm_sim_arm_config_t;
 
 /* Defaults: links 0.5 m, 1 kg, com 0.25 m, inertia m*l^2/12, friction 0.1,
- * tau_max 50 N*m, at rest at q = 0; monotonic clock; zero-torque stop. */
+ * tau_max 50 N*m, at rest at q = 0; monotonic clock; zero-torque stop; no
+ * gripper, no object (their parameters get the defaults above). */
 void chm_sim_arm_config_init(chm_sim_arm_config_t* cfg, uint32_t joints);
 
 /* Create the arm's file (and FIFO) atomically. Errors: -EINVAL bad config;
@@ -120,6 +143,13 @@ typedef struct chm_sim_arm_state {
     double tip[2], tip_vel[2];       /* tip position and velocity (x, z) */
     double wrench[6];     /* contact force/torque on the tip (Fx Fy Fz Tx Ty Tz), world frame */
     double kinetic, potential;       /* J; potential is 0 at z = 0 */
+    /* Gripper and object (zero without them). */
+    double grip_cmd;      /* commanded opening, m */
+    double grip_opening;  /* m */
+    double grip_force;    /* squeeze on the object, N */
+    uint32_t held;        /* the object is held */
+    uint32_t pad_;
+    double object[2], object_vel[2]; /* the object's position (x, z) and velocity */
 } chm_sim_arm_state_t;
 
 /* Advance (monotonic clock) and copy the state. Errors: -EINVAL not an arm. */
@@ -131,7 +161,11 @@ int chm_sim_arm_step(chm_sim_t* sim, uint64_t steps);
 int chm_sim_arm_set_torque(chm_sim_t* sim, const double* tau, uint32_t n);
 /* Place the arm (tests): q and qd (NULL = zero). */
 int chm_sim_arm_set_state(chm_sim_t* sim, const double* q, const double* qd, uint32_t n);
-/* Safe stop (latched) / leave it (torque 0). */
+/* The gripper's commanded opening (m, clamped to [0, grip_open_max]).
+ * Errors: -EINVAL not an arm with a gripper, or NaN. */
+int chm_sim_arm_set_grip(chm_sim_t* sim, double opening);
+/* Safe stop (latched) / leave it (torque 0). Neither moves the gripper: a
+ * safe stop must not drop what it holds. */
 int chm_sim_arm_stop(chm_sim_t* sim);
 int chm_sim_arm_resume(chm_sim_t* sim);
 

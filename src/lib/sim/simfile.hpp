@@ -24,7 +24,7 @@ struct chm_sim {
 namespace chm::sim {
 
 inline constexpr std::uint32_t kMagic = 0x434d5331;  // "CMS1"
-inline constexpr std::uint16_t kVersion = 1;
+inline constexpr std::uint16_t kVersion = 2;  // 2: the arm's gripper and object
 inline constexpr std::size_t kPage = 4096;           // the register page's offset
 
 struct Header {
