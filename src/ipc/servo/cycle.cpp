@@ -17,11 +17,7 @@ namespace {
 constexpr std::uint64_t kStopWaitNs = 2'000'000'000ull;
 
 chm_err_action_t record_cycle_error(const chm_err_info_t* i, void* arg) {
-    auto* m = static_cast<chm_module*>(arg);
-    set_last_error(m, "cycle: %s error %d (%s)%s%s%s%s", i->module_name ? i->module_name : "?", i->code,
-                   i->message ? i->message : "", i->call ? " in " : "", i->call ? i->call : "", i->detail ? ": " : "",
-                   i->detail ? i->detail : "");
-    return CHM_ERR_ABORT;
+    return record_error_as(static_cast<chm_module*>(arg), "cycle: ", i);
 }
 
 chm_deadline_action on_miss(const chm_deadline_info_t* info, void* arg) {
@@ -183,7 +179,7 @@ int commit(std::uint64_t at, const Item* items, std::uint32_t count, const char*
     // A module handed over needs nothing here (it stops when its outputs
     // are taken, and may have done so already if this commit is late);
     // the others are checked again.
-    Item rest[kSwitchMax];
+    Item rest[kSwitchMax] = {};
     std::uint32_t n_rest = 0;
     for (std::uint32_t i = 0; i < count; ++i)
         if (!items[i].handed) rest[n_rest++] = items[i];

@@ -41,14 +41,8 @@ struct Call {
     bool returned = false;
 };
 
-// A task-wide handler of every entry and cycle task: an error signal or a
-// processor exception becomes the module's last error, and the task ends.
 chm_err_action_t record_error(const chm_err_info_t* i, void* arg) {
-    auto* m = static_cast<chm_module*>(arg);
-    set_last_error(m, "%s error %d (%s)%s%s%s%s", i->module_name ? i->module_name : "?", i->code,
-                   i->message ? i->message : "", i->call ? " in " : "", i->call ? i->call : "",
-                   i->detail ? ": " : "", i->detail ? i->detail : "");
-    return CHM_ERR_ABORT;
+    return record_error_as(static_cast<chm_module*>(arg), "", i);
 }
 
 void entry_task(void* arg) {
@@ -128,6 +122,13 @@ int param_index(const chm_module* m, const char* name) {
 }
 
 }  // namespace
+
+chm_err_action_t record_error_as(chm_module* m, const char* prefix, const chm_err_info_t* i) {
+    set_last_error(m, "%s%s error %d (%s)%s%s%s%s", prefix, i->module_name ? i->module_name : "?", i->code,
+                   i->message ? i->message : "", i->call ? " in " : "", i->call ? i->call : "",
+                   i->detail ? ": " : "", i->detail ? i->detail : "");
+    return CHM_ERR_ABORT;
+}
 
 void set_last_error(chm_module* m, const char* fmt, ...) {
     va_list ap;

@@ -7,6 +7,7 @@
 #include <cstddef>
 #include <cstdint>
 
+#include "chimera/err.h"
 #include "ipc/servo/servo.hpp"
 
 namespace chm::servo {
@@ -51,5 +52,9 @@ void enter_error(chm_module* m);
 void stop_cycle_task(chm_module* m);
 
 void set_last_error(chm_module* m, const char* fmt, ...) __attribute__((format(printf, 2, 3)));
+// The task-wide error handler of a module's tasks: an error signal or a
+// processor exception becomes its last error (`prefix` first), and the
+// task ends.
+chm_err_action_t record_error_as(chm_module* m, const char* prefix, const chm_err_info_t* i);
 
 }  // namespace chm::servo
