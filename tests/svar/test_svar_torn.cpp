@@ -68,7 +68,11 @@ void reader(void*) {
     const std::uint64_t want = reads_wanted();
     std::uint64_t reads = 0, torn = 0, backwards = 0, distinct = 0;
     double last = 0;
-    while (reads < want && !b->stop.load(std::memory_order_relaxed)) {
+    // Until enough reads AND enough of them overlapped the writer's work
+    // (under an emulator the writer's process may start late), bounded.
+    const std::uint64_t give_up = chm_time_now() + 30'000'000'000ull;
+    while ((reads < want || distinct < 1000) && !b->stop.load(std::memory_order_relaxed) &&
+           (reads % 4096 || chm_time_now() < give_up)) {
         if (chm_svar_set_read(s) != 0) continue;
         ++reads;
         bool same = true;
