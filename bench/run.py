@@ -427,7 +427,7 @@ def plots(rows, lateness, outdir, exps=None):
                 ax.plot([min(rs), max(rs)], [i, i], color="black", lw=1)
             t = r.get("target") or ""
             if t.startswith("ratio <="):
-                b = float(t.split()[-1])
+                b = float(t.split()[2])  # "ratio <= B" or "ratio <= B +P/peer"
                 ax.plot([b, b], [i - 0.4, i + 0.4], color="black", lw=2)
         for i, r in enumerate(rr):
             ax.annotate(f" {r['ratio']:.3g}x", (r["ratio"], i), va="center", fontsize=8)

@@ -254,10 +254,13 @@ int cancel(std::uint64_t at, const Item* items, std::uint32_t count, const char*
     for (std::uint32_t i = 0; i < count; ++i) {
         chm_module* m = items[i].m;
         if (!items[i].on || m->on_at != at || m->state.load() != CHM_SERVO_ON) continue;
+        // Done before the destroy: its end hook must not take this for a
+        // fault (ERROR would write safe values into variables another
+        // module still writes).
+        m->cycle_done = true;
         chm_task_destroy(m->cycle_task);
         chm_task_join(m->cycle_task, CHM_NO_WAIT, nullptr);
         m->cycle_task = CHM_TID_NONE;
-        m->cycle_done = true;
         run_entry(m, kEntryOff);
         chm_svar_set_release(m->set);
         m->on_at = 0;
