@@ -88,6 +88,11 @@ bool same_attachment(const chm_svar_set* s) {
 
 SetVar* outputs(chm_svar_set* s) { return s->vars + s->n_in; }
 
+// Does entry `e` name `s` as its writer?
+bool holds(const chm_svar_set* s, const Entry* e) {
+    return e->writer_token.load(Acq) == s->a->token && e->writer_id.load(Acq) == s->id;
+}
+
 // Drop the set's claims (those still naming it) under the table lock.
 int release_claims(chm_svar_set* s) {
     if (!s->claims_held.exchange(false)) return 0;
@@ -95,7 +100,7 @@ int release_claims(chm_svar_set* s) {
     if (int r = lock(s->table)) return r;
     for (std::uint32_t k = 0; k < s->n_out; ++k) {
         Entry* e = outputs(s)[k].e;
-        if (e->writer_token.load(Acq) == s->a->token && e->writer_id.load(Acq) == s->id) {
+        if (holds(s, e)) {
             e->writer_token.store(0, Rel);
             e->writer_id.store(0, Rel);
         }
@@ -188,29 +193,36 @@ bool displaceable(const Entry* e, const char* const* displace, size_t n) {
     return false;
 }
 
+// With the table lock held: could `s` claim every output now (each held by
+// it, free, held by a dead writer or by one named in `displace`)? 0, or
+// -EBUSY with the message naming the variable and its writer.
+int check_claimable_locked(const chm_svar_set* s, const char* const* displace, size_t n_displace) {
+    for (std::uint32_t k = 0; k < s->n_out; ++k) {
+        const Entry* e = s->vars[s->n_in + k].e;
+        if (holds(s, e) || !claim_live(s->table, e) || displaceable(e, displace, n_displace)) continue;
+        char other[kNameLen];
+        std::memcpy(other, e->writer_name, kNameLen);
+        other[kNameLen - 1] = 0;
+        bp::set_error("%s: state variable %s is written by %s already: one writer per variable", s->owner,
+                      s->vars[s->n_in + k].name, other);
+        return -EBUSY;
+    }
+    return 0;
+}
+
 // Claim every output for `s`, all or none, under the table lock; a live
 // writer named in `displace` passes its claim on.
 int claim_outputs(chm_svar_set* s, const char* const* displace, size_t n_displace, std::uint64_t since = 0) {
     if (s->n_out == 0) return 0;
-    auto mine = [s](const Entry* e) {
-        return e->writer_token.load(Acq) == s->a->token && e->writer_id.load(Acq) == s->id;
-    };
     if (int r = lock(s->table)) return r;
-    for (std::uint32_t k = 0; k < s->n_out; ++k) {
-        const Entry* e = outputs(s)[k].e;
-        if (mine(e) || !claim_live(s->table, e) || displaceable(e, displace, n_displace)) continue;
-        char other[kNameLen];
-        std::memcpy(other, e->writer_name, kNameLen);
-        other[kNameLen - 1] = 0;
+    if (int r = check_claimable_locked(s, displace, n_displace)) {
         unlock(s->table);
-        bp::set_error("%s: state variable %s is written by %s already: one writer per variable", s->owner,
-                      outputs(s)[k].name, other);
-        return -EBUSY;
+        return r;
     }
     bp::lock_mark_dirty(&s->table.hdr()->lock);
     for (std::uint32_t k = 0; k < s->n_out; ++k) {
         Entry* e = outputs(s)[k].e;
-        if (mine(e)) continue;  // claiming again re-asserts only what another took
+        if (holds(s, e)) continue;  // claiming again re-asserts only what another took
         std::memcpy(e->writer_name, s->owner, kNameLen);  // the name before the token: info reads both
         e->since_lo.store(std::uint32_t(since), Rel);
         e->since_hi.store(std::uint32_t(since >> 32), Rel);
@@ -221,6 +233,18 @@ int claim_outputs(chm_svar_set* s, const char* const* displace, size_t n_displac
     s->claims_held.store(true);
     unlock(s->table);
     return 0;
+}
+
+// The argument checks every claim call makes, then `op` under the
+// table lock (claim_outputs or check_claimable_locked); `call` names it.
+template <class Op>
+int with_claim_args(const char* call, chm_svar_set* set, const char* const* displace, size_t n_displace, Op op) {
+    int r;
+    if (!set || (n_displace && !displace)) r = (bp::set_error("%s: NULL set or names", call), -EINVAL);
+    else if (!same_attachment(set))
+        r = (bp::set_error("%s %s: its backplane attachment is gone", call, set->owner), -ENOTCONN);
+    else r = op();
+    return chm::ipc::leave(r, call);
 }
 
 int create_impl(const char* owner, const char* const* inputs, size_t n_in, const char* const* outs, size_t n_out,
@@ -300,50 +324,31 @@ int chm_svar_set_open(const char* owner, const char* const* inputs, size_t n_in,
 }
 
 int chm_svar_set_claim(chm_svar_set_t* set, const char* const* displace, size_t n_displace) {
-    int r;
-    if (!set || (n_displace && !displace)) r = (bp::set_error("chm_svar_set_claim: NULL set or names"), -EINVAL);
-    else if (!same_attachment(set))
-        r = (bp::set_error("chm_svar_set_claim %s: its backplane attachment is gone", set->owner), -ENOTCONN);
-    else r = claim_outputs(set, displace, n_displace);
-    return chm::ipc::leave(r, "chm_svar_set_claim");
+    return with_claim_args("chm_svar_set_claim", set, displace, n_displace,
+                           [&] { return claim_outputs(set, displace, n_displace); });
 }
 
 int chm_svar_set_claim_at(chm_svar_set_t* set, const char* const* displace, size_t n_displace, uint64_t at_ns) {
-    int r;
-    if (!set || (n_displace && !displace)) r = (bp::set_error("chm_svar_set_claim_at: NULL set or names"), -EINVAL);
-    else if (!same_attachment(set))
-        r = (bp::set_error("chm_svar_set_claim_at %s: its backplane attachment is gone", set->owner), -ENOTCONN);
-    else r = claim_outputs(set, displace, n_displace, at_ns);
-    return chm::ipc::leave(r, "chm_svar_set_claim_at");
+    return with_claim_args("chm_svar_set_claim_at", set, displace, n_displace,
+                           [&] { return claim_outputs(set, displace, n_displace, at_ns); });
 }
 
 int chm_svar_set_check_claim(chm_svar_set_t* set, const char* const* displace, size_t n_displace) {
-    int r = 0;
-    if (!set || (n_displace && !displace)) r = (bp::set_error("chm_svar_set_check_claim: NULL set or names"), -EINVAL);
-    else if (!same_attachment(set))
-        r = (bp::set_error("chm_svar_set_check_claim %s: its backplane attachment is gone", set->owner), -ENOTCONN);
-    else if ((r = lock(set->table)) == 0) {
-        for (std::uint32_t k = 0; k < set->n_out && r == 0; ++k) {
-            const Entry* e = outputs(set)[k].e;
-            const bool mine = e->writer_token.load(Acq) == set->a->token && e->writer_id.load(Acq) == set->id;
-            if (mine || !claim_live(set->table, e) || displaceable(e, displace, n_displace)) continue;
-            char other[kNameLen];
-            std::memcpy(other, e->writer_name, kNameLen);
-            other[kNameLen - 1] = 0;
-            bp::set_error("%s: state variable %s is written by %s already: one writer per variable", set->owner,
-                          outputs(set)[k].name, other);
-            r = -EBUSY;
+    return with_claim_args("chm_svar_set_check_claim", set, displace, n_displace, [&] {
+        int r = lock(set->table);
+        if (r == 0) {
+            r = check_claimable_locked(set, displace, n_displace);
+            unlock(set->table);
         }
-        unlock(set->table);
-    }
-    return chm::ipc::leave(r, "chm_svar_set_check_claim");
+        return r;
+    });
 }
 
 int chm_svar_set_displaced(const chm_svar_set_t* set, uint64_t release_ns) {
     if (!set || !set->claims_held.load(std::memory_order_relaxed)) return 0;
     for (std::uint32_t k = 0; k < set->n_out; ++k) {
         const Entry* e = set->vars[set->n_in + k].e;
-        if (e->writer_token.load(Acq) == set->a->token && e->writer_id.load(Acq) == set->id) continue;
+        if (holds(set, e)) continue;
         // Taken: by whom and since when is written before the token.
         const std::uint64_t since = std::uint64_t(e->since_hi.load(Acq)) << 32 | e->since_lo.load(Acq);
         if (since <= release_ns) return 1;
