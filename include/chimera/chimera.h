@@ -7,6 +7,7 @@
 #include "chimera/config.h"
 #include "chimera/dev.h"
 #include "chimera/err.h"
+#include "chimera/host.h"
 #include "chimera/io.h"
 #include "chimera/irq.h"
 #include "chimera/kernel.h"
@@ -26,5 +27,6 @@
 #include "chimera/svar.h"
 #include "chimera/task.h"
 #include "chimera/usig.h"
+#include "chimera/xfs.h"
 
 #endif

@@ -26,6 +26,7 @@
 #include "chimera/chimera.h"
 #include "chimera/rtpu.h"
 #include "ipc/wake/wake.hpp"
+#include "host/server/server.hpp"
 #include "ipc/xmail/xmail.hpp"
 #include "port.hpp"
 #include "realtime.hpp"
@@ -60,6 +61,10 @@ void usage(FILE* f) {
         "                  CAP_SYS_NICE or an rtprio limit)\n"
         "--cpu K           run only on CPU K\n"
         "--lock-memory     mlockall: no page fault in a control loop\n"
+        "--host-server ROOT  be the host server (slot 0, --rtpu 0 implied): serve the\n"
+        "                  extended file system beneath ROOT and host procedure\n"
+        "                  calls to every RTPU's tasks (chimera/xfs.h, host.h)\n"
+        "--host-allow-shell  let chm_host_run start a shell (sh, bash...)\n"
         "--programs DIR    load programs (here and by express mail) only from under\n"
         "                  DIR (any number); without it, only files that no one but\n"
         "                  you or root can change (SECURITY.md)\n"
@@ -83,6 +88,8 @@ struct Options {
     chimera_rtpu::HostRealtime realtime;
     std::vector<Program> programs;
     std::vector<const char*> program_dirs;  // --programs
+    const char* host_root = nullptr;        // --host-server: serve the host from slot 0
+    bool allow_shell = false;               // --host-allow-shell
 };
 
 [[noreturn]] void bad(const char* fmt, const char* arg) {
@@ -145,6 +152,14 @@ Options parse(int argc, char** argv) {
             o.program_dirs.push_back(v);
         } else if (!std::strcmp(a, "--lock-memory")) {
             o.realtime.lock_memory = true;
+        } else if (!std::strcmp(a, "--host-server")) {
+            const char* v = value(a);
+            struct stat st;
+            if (::stat(v, &st) != 0 || !S_ISDIR(st.st_mode)) bad("--host-server \"%s\": not a directory", v);
+            o.host_root = v;
+            if (o.rtpu < 0) o.rtpu = 0;
+        } else if (!std::strcmp(a, "--host-allow-shell")) {
+            o.allow_shell = true;
         } else if (!std::strcmp(a, "--")) {
             ++i;
             break;
@@ -155,7 +170,9 @@ Options parse(int argc, char** argv) {
         }
     }
     if (o.rtpu < 0) bad("%s", "--rtpu N is required");
-    if (o.rtpu == 0) bad("%s", "RTPU 0 is the host server's slot; RTPUs are numbered from 1");
+    if (o.rtpu == 0 && !o.host_root) bad("%s", "RTPU 0 is the host server's slot (--host-server ROOT); RTPUs are numbered from 1");
+    if (o.rtpu != 0 && o.host_root) bad("%s", "--host-server runs in slot 0 only (--rtpu 0)");
+    if (o.allow_shell && !o.host_root) bad("%s", "--host-allow-shell is an option of --host-server");
     // Programs: PATH [ARG...], separated by "--".
     while (i < argc) {
         if (!std::strcmp(argv[i], "--")) {
@@ -296,6 +313,7 @@ int main(int argc, char** argv) {
     cfg.idle_poll_ns = std::uint64_t(o.idle_poll_us) * 1000u;
     auto fail = [&](const char* what, int r) {
         std::fprintf(stderr, "chimera-rtpu: RTPU %d: %s: %s\n", o.rtpu, what, std::strerror(-r));
+        chm::host::server::stop();
         chm::xmail::server_stop();
         chm::ipc::wake_unbind_kernel();
         chm_kernel_fini();
@@ -314,6 +332,12 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "chimera-rtpu: RTPU %d: warning: the backplane's ring records are below %d bytes: "
                      "no express mail\n", o.rtpu, CHM_RTPU_RECORD_MIN);
     }
+    if (o.host_root) {
+        chm::host::server::Options ho;
+        ho.root = o.host_root;
+        ho.allow_shell = o.allow_shell;
+        if (int r = chm::host::server::start(ho)) return fail("cannot start the host server", r);
+    }
     if (int r = setup_shutdown()) return fail("cannot set up the stop signals", r);
 
     for (const Program& p : o.programs) {
@@ -324,6 +348,7 @@ int main(int argc, char** argv) {
             const char* why = chm_program_error();
             std::fprintf(stderr, "chimera-rtpu: RTPU %d: cannot load %s: %s%s%s\n", o.rtpu, p.path.c_str(),
                          std::strerror(-r), *why ? ": " : "", why);
+            chm::host::server::stop();
             chm::xmail::server_stop();
             chm::ipc::wake_unbind_kernel();
             chm_kernel_fini();
@@ -336,12 +361,15 @@ int main(int argc, char** argv) {
     if (o.realtime.cpu >= 0) host += ", CPU " + std::to_string(o.realtime.cpu);
     if (o.realtime.lock_memory) host += ", memory locked";
     if (o.idle_poll_us) host += ", idle poll " + std::to_string(o.idle_poll_us) + " us";
+    if (o.host_root)
+        host += std::string(", host server for ") + chm::host::server::fs_root() + (o.allow_shell ? " (shells allowed)" : "");
     std::printf("chimera-rtpu: RTPU %d joined %s (pid %d, %s%s, %zu program%s)\n", o.rtpu, path, int(::getpid()),
                 policy_name(o.policy), host.c_str(), o.programs.size(), o.programs.size() == 1 ? "" : "s");
     std::fflush(stdout);
 
     const int code = chm_kernel_run();
 
+    chm::host::server::stop();
     chm::xmail::server_stop();
     chm::ipc::wake_unbind_kernel();
     chm_kernel_fini();

@@ -48,6 +48,7 @@ struct Server {
     bool stop_after = false;
 };
 Server g_s;
+DeferFn g_deferred[kKindEnd] = {};
 
 void on_interrupt(int, void*) { chm_sem_v(&g_s.wake); }
 
@@ -195,14 +196,33 @@ void serve(Record* r, std::uint32_t seq) {
     const std::uint32_t len = std::min(r->len, g_s.room);
     const Kind kind = Kind(r->kind);
     std::memcpy(g_s.req, payload_of(r), len);
+    if (kind < kKindEnd && g_deferred[kind]) {
+        ++g_s.served;
+        g_s.ring->reserved[0] = g_s.served;
+        const bp::Attachment* a = bp::current();
+        const std::uint32_t index = std::uint32_t(
+            (reinterpret_cast<char*>(r) - reinterpret_cast<char*>(g_s.ring + 1)) / ring_record_size(*a));
+        g_deferred[kind](r, seq, index, g_s.req, len, r->owner.load(R));
+        return;
+    }
     std::uint32_t n = 0;
     const int status = dispatch(kind, g_s.req, len, g_s.rep, &n, r->owner.load(R));
-    r->status = status;
-    r->len = n;
-    if (n) std::memcpy(payload_of(r), g_s.rep, n);
     ++g_s.served;
     g_s.ring->reserved[0] = g_s.served;
-    st = make_state(seq, kServing);
+    finish(r, seq, status, g_s.rep, n);
+}
+
+}  // namespace
+
+void set_deferred(Kind kind, DeferFn fn) {
+    if (kind < kKindEnd) g_deferred[kind] = fn;
+}
+
+void finish(Record* r, std::uint32_t seq, int status, const void* reply, std::uint32_t n) {
+    r->status = status;
+    r->len = n;
+    if (n) std::memcpy(payload_of(r), reply, n);
+    std::uint32_t st = make_state(seq, kServing);
     if (!r->state.compare_exchange_strong(st, make_state(seq, kReplied), Rel, R)) {
         r->state.store(make_state(seq, kFree), Rel);  // the sender gave up: the record is ours to free
         return;
@@ -211,6 +231,8 @@ void serve(Record* r, std::uint32_t seq) {
     ipc::grant_word(reinterpret_cast<std::uint32_t*>(&r->reply), 1, bp::token_slot(owner),
                     ipc::WaiterId{r->waiter_task.load(R), r->waiter_urgency.load(R)});
 }
+
+namespace {
 
 // Serve every posted record, oldest first; free what dead senders left.
 void serve_all() {

@@ -56,7 +56,7 @@ inline constexpr std::uint32_t kRecordMin = 128;   // CHM_RTPU_RECORD_MIN
 inline constexpr std::uint32_t kStaleWriteMs = 2000;
 
 enum Kind : std::uint32_t {
-    kPing = 1, kSpawn, kSignal, kTasks, kFind, kDestroy, kStop, kServo, kKindEnd
+    kPing = 1, kSpawn, kSignal, kTasks, kFind, kDestroy, kStop, kServo, kHost, kKindEnd
 };
 
 // ------------------------------------------------------------ wire formats
@@ -183,5 +183,21 @@ int server_start(int priority);
 void server_stop();
 // The server task, or CHM_TID_NONE.
 chm_tid_t server_task();
+
+// ------------------------------------------------------------ deferred replies
+// A request whose work blocks (the host server's file and program calls,
+// src/host/) is not answered on the server task: a handler set for its kind
+// takes a copy of the request and the record (still SERVING) and returns;
+// some other thread of the process later answers with finish(). The sender
+// waits as for any request, bounded by its own timeout and by the server's
+// liveness. At most one handler per kind; set before server_start.
+using DeferFn = void (*)(Record* r, std::uint32_t seq, std::uint32_t index, const char* req,
+                         std::uint32_t len, std::uint32_t owner);
+void set_deferred(Kind kind, DeferFn fn);
+// Answer a deferred request from any thread of the serving process: the
+// reply (n bytes, at most the record's payload room) and status go into the
+// record, which becomes REPLIED and its sender is woken; a sender that gave
+// up meanwhile (ABANDONED) gets nothing and the record is freed.
+void finish(Record* r, std::uint32_t seq, int status, const void* reply, std::uint32_t n);
 
 }  // namespace chm::xmail

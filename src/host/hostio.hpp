@@ -1,0 +1,63 @@
+// The host server's wire format (docs/architecture.md, "Host server"):
+// requests of kind xmail::kHost in the ring of backplane slot 0, each a
+// HostRequest then `text_len` bytes (a path, a name, inline data or an
+// argument vector); the reply's payload is op-specific, its status the
+// record's status (>= 0 or -errno).
+//
+// Bulk data (reads and writes beyond what one ring record carries) moves
+// through the sender's transfer segment: a named shared segment in common
+// memory, kBulkBuffers buffers of kBulkSize bytes, which the sender's
+// process creates on first use; a request names the buffer it lent. The
+// host server checks the segment's name, size and the buffer index before
+// it touches anything.
+#pragma once
+
+#include <cstdint>
+#include <cstdio>
+
+namespace chm::host {
+
+enum Op : std::uint32_t {
+    kOpen = 1,   // text: path; a = flags (CHM_XFS_*), b = mode -> status: handle
+    kClose,      // fd
+    kRead,       // fd, b = bytes wanted, a = offset or -1 (current position), bulk
+    kWrite,      // fd, text or bulk: the data, a = offset or -1
+    kSeek,       // fd, a = offset, b = whence -> reply: uint64 position
+    kStat,       // text: path -> reply: StatReply
+    kFstat,      // fd -> reply: StatReply
+    kIoctl,      // fd, b = request, text: argument bytes in -> reply: out
+    kChdir,      // text: path beneath the root
+    kGetcwd,     // -> reply: path beneath the root, "" at the root
+    kGetenv,     // text: name -> reply: value (status -ENOENT: not set)
+    kRun,        // text: argv strings; a = argc -> status: exit status
+    kOpEnd
+};
+
+struct HostRequest {
+    std::uint32_t op;
+    std::int32_t fd;        // a handle from kOpen
+    std::uint64_t a;
+    std::uint64_t b;
+    std::uint32_t bulk;     // 0: none; k: buffer k-1 of the sender's segment
+    std::uint32_t text_len; // bytes after this header
+};
+static_assert(sizeof(HostRequest) == 32);
+
+struct StatReply {
+    std::uint64_t size;
+    std::uint64_t mtime_ns;
+    std::uint32_t mode;     // st_mode
+    std::uint32_t pad;
+};
+static_assert(sizeof(StatReply) == 24);
+
+inline constexpr std::uint32_t kBulkSize = 64 * 1024;
+inline constexpr std::uint32_t kBulkBuffers = 2;
+inline constexpr int kServerSlot = 0;
+
+// The transfer segment of the process in backplane slot `slot`.
+inline void bulk_name(char* out, std::size_t n, std::uint32_t slot) {
+    std::snprintf(out, n, "chimera.hostio.%u", unsigned(slot));
+}
+
+}  // namespace chm::host

@@ -1,0 +1,51 @@
+// The host server (docs/architecture.md, "Host server"): the part of
+// chimera-rtpu --host-server ROOT that serves kHost express mail. The
+// server task hands each request to a pool of worker threads, which do the
+// blocking work (file I/O, running a program) and answer with
+// xmail::finish; the sender's task stays parked meanwhile, its RTPU runs on.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "host/hostio.hpp"
+
+namespace chm::host::server {
+
+struct Options {
+    const char* root = ".";     // every path is resolved beneath it
+    bool allow_shell = false;   // chm_host_run may start a shell
+    unsigned workers = 6;       // requests served at once
+};
+
+// On the kernel thread of the process joined as slot 0, after
+// xmail::server_start: open the root, start the workers and take kHost
+// requests. Errors: -ENOTDIR/-ENOENT/-EACCES the root; -EBUSY started;
+// -ENOTCONN not slot 0; -EAGAIN a thread could not be made.
+int start(const Options& o);
+// Stop the workers (requests being served are answered first) and close
+// every handle. Kernel thread, after chm_kernel_run returned.
+void stop();
+
+// ------------------------------------------------------------ internals
+
+// One client process, by backplane slot.
+struct Client {
+    std::uint32_t token = 0;    // the process it is for; another token resets it
+    std::string cwd;            // beneath the root, "" = the root
+    char* bulk = nullptr;       // its transfer segment, once attached
+};
+
+// Paths (fs.cpp). `rel` is relative to the root. Each returns an fd or
+// -errno, with *why set to a message on refusal.
+int fs_init(const char* root);
+void fs_fini();
+int fs_open(const std::string& rel, int oflags, unsigned mode, const char** why);
+// The path of an open fd beneath the root ("" = the root), or -EXDEV.
+int fs_relative(int fd, std::string* out);
+const std::string& fs_root();
+
+// Join a client's working directory and a path; -EXDEV for an absolute path.
+int fs_join(const Client& c, const char* path, std::string* out, const char** why);
+
+}  // namespace chm::host::server

@@ -1,0 +1,257 @@
+// Suite `host`: the host server (chimera-rtpu --host-server ROOT in slot 0)
+// serving the extended file system and host procedure calls, to this test
+// process (a host thread) and to tasks on a real RTPU (xfs_probe.c).
+#include <gtest/gtest.h>
+
+#include <cstdint>
+#include <fstream>
+#include <string>
+
+#include <sys/stat.h>
+
+#include "chimera/host.h"
+#include "chimera/xfs.h"
+#include "../rtpu/rtpu_fixture.hpp"
+
+namespace chm::test {
+namespace {
+
+class HostTest : public RtpuTest {
+protected:
+    void SetUp() override {
+        RtpuTest::SetUp();
+        root_ = dir_ + "/root";
+        ASSERT_EQ(mkdir(root_.c_str(), 0700), 0);
+        ASSERT_EQ(mkdir((root_ + "/sub").c_str(), 0700), 0);
+        write(root_ + "/hello.txt", "hello, host\n");
+        write(dir_ + "/secret.txt", "outside the root\n");
+        ASSERT_EQ(symlink("../secret.txt", (root_ + "/escape").c_str()), 0);
+        ASSERT_EQ(symlink("/etc/passwd", (root_ + "/abs").c_str()), 0);
+        ASSERT_EQ(symlink("hello.txt", (root_ + "/inside").c_str()), 0);
+        create();
+        server_ = start_rtpu(0, {"--host-server", root_});
+        ASSERT_TRUE(wait_serving(0, server_)) << read_file(err_of(0));
+        chm_host_timeout_set(10'000'000'000ull);
+    }
+    static void write(const std::string& path, const std::string& text) {
+        std::ofstream(path) << text;
+    }
+    // Start xfs_probe on RTPU 1 with `args`; its result lines go to probe.out.
+    void probe(const std::vector<std::string>& args) {
+        if (rtpu1_ < 0) {
+            rtpu1_ = start_rtpu(1);
+            ASSERT_TRUE(wait_serving(1, rtpu1_)) << read_file(err_of(1));
+        }
+        std::vector<std::string> all = {probe_out()};
+        all.insert(all.end(), args.begin(), args.end());
+        std::vector<const char*> argv = {XFS_PROBE_SO};
+        for (const std::string& a : all) argv.push_back(a.c_str());
+        chm_tid_t tid;
+        ASSERT_EQ(chm_rtpu_spawn(1, XFS_PROBE_SO, int(argv.size()), argv.data(), &tid), 0) << chm_rtpu_last_error();
+    }
+    std::string probe_out() { return dir_ + "/probe.out"; }
+
+    std::string root_;
+    pid_t server_ = -1, rtpu1_ = -1;
+};
+
+TEST_F(HostTest, ReadWriteSeekStatFromAHostThread) {
+    int fd = chm_xfs_open("hello.txt", CHM_XFS_RDONLY, 0);
+    ASSERT_GE(fd, 0) << chm_xfs_last_error();
+    char buf[64] = {};
+    EXPECT_EQ(chm_xfs_read(fd, buf, sizeof buf), 12);
+    EXPECT_STREQ(buf, "hello, host\n");
+    EXPECT_EQ(chm_xfs_lseek(fd, 7, SEEK_SET), 7);
+    char four[5] = {};
+    EXPECT_EQ(chm_xfs_read(fd, four, 4), 4);
+    EXPECT_STREQ(four, "host");
+    EXPECT_EQ(chm_xfs_pread(fd, four, 4, 0), 4);
+    EXPECT_STREQ(four, "hell");
+    chm_xfs_stat_t st;
+    ASSERT_EQ(chm_xfs_fstat(fd, &st), 0);
+    EXPECT_EQ(st.size, 12u);
+    EXPECT_TRUE(S_ISREG(st.mode));
+    EXPECT_EQ(chm_xfs_close(fd), 0);
+    EXPECT_EQ(chm_xfs_close(fd), -EBADF);
+    EXPECT_NE(std::string(chm_xfs_last_error()).find("handle"), std::string::npos);
+
+    // A write larger than a ring record and than one transfer buffer.
+    std::string big(200'000, 'x');
+    for (std::size_t i = 0; i < big.size(); ++i) big[i] = char('a' + i % 26);
+    fd = chm_xfs_open("sub/big.bin", CHM_XFS_RDWR | CHM_XFS_CREAT | CHM_XFS_TRUNC, 0600);
+    ASSERT_GE(fd, 0) << chm_xfs_last_error();
+    EXPECT_EQ(chm_xfs_write(fd, big.data(), big.size()), std::int64_t(big.size()));
+    EXPECT_EQ(chm_xfs_lseek(fd, 0, SEEK_END), std::int64_t(big.size()));
+    std::string back(big.size(), 0);
+    EXPECT_EQ(chm_xfs_pread(fd, back.data(), back.size(), 0), std::int64_t(big.size()));
+    EXPECT_EQ(back, big);
+    EXPECT_EQ(chm_xfs_close(fd), 0);
+    EXPECT_EQ(read_file(root_ + "/sub/big.bin"), big);
+    ASSERT_EQ(chm_xfs_stat("sub/big.bin", &st), 0);
+    EXPECT_EQ(st.size, big.size());
+    ASSERT_EQ(chm_xfs_stat("inside", &st), 0) << "a link inside the root is followed";
+    EXPECT_EQ(st.size, 12u);
+
+    EXPECT_EQ(chm_xfs_open("missing.txt", CHM_XFS_RDONLY, 0), -ENOENT);
+    EXPECT_NE(std::string(chm_xfs_last_error()).find("missing.txt"), std::string::npos) << chm_xfs_last_error();
+    EXPECT_EQ(chm_xfs_open("hello.txt", 0x1000, 0), -EINVAL);
+    EXPECT_EQ(chm_xfs_read(12345, buf, 1), -EBADF);
+}
+
+TEST_F(HostTest, EveryEscapeIsRefused) {
+    for (const char* path : {"../secret.txt", "/etc/passwd", "escape", "abs", "sub/../../secret.txt",
+                             "sub/../../root/../secret.txt", "/"}) {
+        const int fd = chm_xfs_open(path, CHM_XFS_RDONLY, 0);
+        EXPECT_EQ(fd, -EXDEV) << path;
+        const std::string why = chm_xfs_last_error();
+        EXPECT_NE(why.find(path), std::string::npos) << why;
+        EXPECT_TRUE(why.find("root") != std::string::npos) << why;
+        chm_xfs_stat_t st;
+        EXPECT_EQ(chm_xfs_stat(path, &st), -EXDEV) << path;
+    }
+    // Creating through an escaping link creates nothing outside.
+    ASSERT_EQ(symlink("../made.txt", (root_ + "/maker").c_str()), 0);
+    EXPECT_EQ(chm_xfs_open("maker", CHM_XFS_WRONLY | CHM_XFS_CREAT, 0600), -EXDEV);
+    struct stat st;
+    EXPECT_NE(stat((dir_ + "/made.txt").c_str(), &st), 0);
+    EXPECT_EQ(chm_host_chdir(".."), -EXDEV);
+    // ".." that stays inside is fine.
+    const int fd = chm_xfs_open("sub/../hello.txt", CHM_XFS_RDONLY, 0);
+    EXPECT_GE(fd, 0) << chm_xfs_last_error();
+    chm_xfs_close(fd);
+}
+
+TEST_F(HostTest, ChdirGetcwdGetenv) {
+    char cwd[256] = "x";
+    ASSERT_EQ(chm_host_getcwd(cwd, sizeof cwd), 0);
+    EXPECT_STREQ(cwd, "");
+    ASSERT_EQ(chm_host_chdir("sub"), 0) << chm_xfs_last_error();
+    ASSERT_EQ(chm_host_getcwd(cwd, sizeof cwd), 0);
+    EXPECT_STREQ(cwd, "sub");
+    EXPECT_EQ(chm_xfs_open("hello.txt", CHM_XFS_RDONLY, 0), -ENOENT);
+    int fd = chm_xfs_open("../hello.txt", CHM_XFS_RDONLY, 0);
+    EXPECT_GE(fd, 0) << chm_xfs_last_error();
+    chm_xfs_close(fd);
+    EXPECT_EQ(chm_host_chdir("hello"), -ENOENT);
+    EXPECT_EQ(chm_host_chdir("../hello.txt"), -ENOTDIR);
+    ASSERT_EQ(chm_host_chdir(".."), 0);
+    ASSERT_EQ(chm_host_getcwd(cwd, sizeof cwd), 0);
+    EXPECT_STREQ(cwd, "");
+    EXPECT_EQ(chm_host_getcwd(cwd, 0), -EINVAL);
+
+    char v[256];
+    const int n = chm_host_getenv("PATH", v, sizeof v);  // the server inherited ours
+    EXPECT_GT(n, 0);
+    EXPECT_EQ(chm_host_getenv("CHIMERA_SURELY_NOT_SET_42", v, sizeof v), -ENOENT);
+    EXPECT_EQ(chm_host_getenv("A=B", v, sizeof v), -EINVAL);
+    EXPECT_EQ(chm_host_getenv("PATH", v, 2), -ERANGE);
+}
+
+TEST_F(HostTest, RunHostProgramsFromAnArgumentVector) {
+    ASSERT_EQ(chm_host_chdir("sub"), 0);
+    const char* touch[] = {"touch", "made-by-run"};
+    int status = -1;
+    ASSERT_EQ(chm_host_run(2, touch, &status), 0) << chm_xfs_last_error();
+    EXPECT_EQ(status, 0);
+    struct stat st;
+    EXPECT_EQ(stat((root_ + "/sub/made-by-run").c_str(), &st), 0) << "ran in the client's directory";
+    const char* fails[] = {"ls", "no-such-entry"};
+    ASSERT_EQ(chm_host_run(2, fails, &status), 0);
+    EXPECT_EQ(status, 2);  // ls: cannot access
+    const char* killed[] = {"sleep", "5"};
+    (void)killed;
+    const char* shell[] = {"sh", "-c", "echo no"};
+    EXPECT_EQ(chm_host_run(3, shell, &status), -EPERM);
+    EXPECT_NE(std::string(chm_xfs_last_error()).find("shell"), std::string::npos) << chm_xfs_last_error();
+    const char* none[] = {"chimera-no-such-program"};
+    EXPECT_EQ(chm_host_run(1, none, &status), -ENOENT);
+    EXPECT_EQ(chm_host_run(0, none, &status), -EINVAL);
+}
+
+TEST_F(HostTest, ATaskReadsAHostFileWhileItsRtpuKeepsItsPeriods) {
+    // 100 MB of known bytes.
+    const std::string path = root_ + "/data.bin";
+    {
+        std::ofstream f(path, std::ios::binary);
+        std::string block(1 << 20, 0);
+        for (std::size_t i = 0; i < block.size(); ++i) block[i] = char(i * 7 + 3);
+        for (int i = 0; i < 100; ++i) f << block;
+    }
+    std::uint64_t sum = 0;
+    for (std::size_t i = 0; i < (1u << 20); ++i) sum += std::uint8_t(char(i * 7 + 3));
+    sum *= 100;
+    ASSERT_NO_FATAL_FAILURE(probe({"read", "data.bin"}));
+    ASSERT_TRUE(wait_text(probe_out(), "read ", 120000)) << read_file(err_of(1));
+    const std::string out = read_file(probe_out());
+    std::printf("%s", out.c_str());  // the ticker's cycles and misses meanwhile, for the log
+    EXPECT_NE(out.find("read bytes=104857600 sum=" + std::to_string(sum) + " size=104857600 stat=0"),
+              std::string::npos) << out;
+}
+
+TEST_F(HostTest, ABlockedReadParksOnlyItsTask) {
+    const std::string fifo = root_ + "/pipe";
+    ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+    ASSERT_NO_FATAL_FAILURE(probe({"block", "pipe"}));
+    // O_RDWR: our end opens at once (a FIFO open for writing alone would
+    // wait for the server's), and the server's open finds a writer.
+    const int w = open(fifo.c_str(), O_RDWR);
+    ASSERT_GE(w, 0);
+    ASSERT_TRUE(wait_text(probe_out(), "block opened", 10000)) << read_file(probe_out());
+    nap_ms(300);  // the task is parked in its read; the ticker runs on
+    ASSERT_EQ(::write(w, "z", 1), 1);
+    close(w);
+    ASSERT_TRUE(wait_text(probe_out(), "block read=", 10000)) << read_file(probe_out());
+    const std::string out = read_file(probe_out());
+    EXPECT_NE(out.find("block read=1 byte=z"), std::string::npos) << out;
+    // The ticker ran while the read waited: at 1 kHz for >= 300 ms, it
+    // cycled (a blocked RTPU would show 0; any cycles prove it ran).
+    const auto at = out.find("ticks=");
+    ASSERT_NE(at, std::string::npos);
+    EXPECT_GT(std::stoull(out.substr(at + 6)), 10u) << out;
+}
+
+TEST_F(HostTest, StdioOverTheExtendedFileSystem) {
+    ASSERT_NO_FATAL_FAILURE(probe({"stdio", "sub/lines.txt"}));
+    ASSERT_TRUE(wait_text(probe_out(), "stdio ", 30000)) << read_file(err_of(1));
+    EXPECT_NE(read_file(probe_out()).find("stdio lines=1000 good=1000"), std::string::npos)
+        << read_file(probe_out());
+    const std::string text = read_file(root_ + "/sub/lines.txt");
+    EXPECT_EQ(count_lines(text), 1000);
+}
+
+TEST_F(HostTest, TasksAreConfinedAndRunProgramsToo) {
+    ASSERT_NO_FATAL_FAILURE(probe({"open", "hello.txt", "../secret.txt", "escape"}));
+    ASSERT_TRUE(wait_text(probe_out(), "open escape", 30000)) << read_file(err_of(1));
+    const std::string out = read_file(probe_out());
+    EXPECT_NE(out.find("open hello.txt -> 0"), std::string::npos) << out;
+    EXPECT_NE(out.find("open ../secret.txt -> -18 open ../secret.txt: leads out of the host root"), std::string::npos)
+        << out;
+    EXPECT_NE(out.find("open escape -> -18"), std::string::npos) << out;
+    std::remove(probe_out().c_str());
+    ASSERT_NO_FATAL_FAILURE(probe({"run", "touch", "from-task"}));
+    ASSERT_TRUE(wait_text(probe_out(), "run ", 30000));
+    EXPECT_NE(read_file(probe_out()).find("run r=0 status=0"), std::string::npos) << read_file(probe_out());
+    struct stat st;
+    EXPECT_EQ(stat((root_ + "/from-task").c_str(), &st), 0);
+}
+
+TEST_F(HostTest, AHostServerThatDiesFailsTheRequestNotTheTask) {
+    const std::string fifo = root_ + "/never";
+    ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);
+    const int w = open(fifo.c_str(), O_RDWR);  // a writer that never writes
+    ASSERT_GE(w, 0);
+    ASSERT_NO_FATAL_FAILURE(probe({"block", "never"}));
+    ASSERT_TRUE(wait_text(probe_out(), "block opened", 10000)) << read_file(probe_out());
+    nap_ms(100);
+    kill(server_, SIGKILL);
+    ASSERT_TRUE(wait_text(probe_out(), "block read=", 10000)) << read_file(probe_out());
+    EXPECT_NE(read_file(probe_out()).find("block read=-112"), std::string::npos) << read_file(probe_out());  // EHOSTDOWN
+    close(w);
+    chm_rtpu_info_t info;
+    EXPECT_EQ(chm_rtpu_ping(1, &info), 0) << "the RTPU goes on";
+    EXPECT_EQ(chm_xfs_open("hello.txt", CHM_XFS_RDONLY, 0), -EHOSTDOWN);
+    EXPECT_NE(std::string(chm_xfs_last_error()).find("host server"), std::string::npos) << chm_xfs_last_error();
+}
+
+}  // namespace
+}  // namespace chm::test
