@@ -136,6 +136,12 @@ constexpr RowInfo kRows[] = {
      "a switch of 4 modules on 2 RTPUs: call to effect, in periods of the slowest module"},
     {"module_spawn", "ns", "task_spawn_run_exit", kNull, none,
      "spawn a module on an RTPU from a host (load, checks, init in a task)"},
+    // ---- the host server (issue 19): a task on an RTPU, chimera-rtpu
+    // --host-server in slot 0, both in their default configuration
+    {"xfs_read_64k", "ns", "peer_pread_64k", kNull, ratio_le(2),
+     "extended file system: sequential chm_xfs_read of 64 KiB blocks by a task (>= 0.5 x pread's throughput)"},
+    {"host_call_rt", "ns", nullptr, kNull, none,
+     "host procedure call round trip (chm_host_getcwd) from a task"},
     // ---- the matrix library (issue 18 item 5), at a control loop's size
     {"mat_mul_6x6", "ns", "peer_eigen_mul_6x6", kNull, none,
      "chm_mat_mul of two 6x6 views into a third"},
@@ -257,6 +263,7 @@ constexpr RowInfo kRows[] = {
      "mmap + munmap of a 64 KiB stack, its top page touched"},
     {"peer_array_read", "ns", nullptr, kNull, none, "sum of a 64 KiB local array, per 8-byte word"},
     {"peer_array_write", "ns", nullptr, kNull, none, "fill of a 64 KiB local array, per 8-byte word"},
+    {"peer_pread_64k", "ns", nullptr, kNull, none, "pread(2) of a 64 KiB block of a page-cached file"},
     {"peer_memcpy_1kib", "ns", nullptr, kNull, none, "memcpy of 512 B, twice (1 KiB in all), cache-resident"},
     {"peer_memcpy_16kib", "ns", nullptr, kNull, none, "memcpy of 8 KiB, twice (16 KiB in all), cache-resident"},
     {"peer_task_cycle_cpu", "ns", nullptr, kNull, none,

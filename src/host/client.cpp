@@ -33,15 +33,17 @@ enum : int { kNone = 0, kMaking = 1, kReady = 2, kUnavailable = 3 };
 std::atomic<int> g_bulk_state{kNone};
 char* g_bulk_base = nullptr;
 std::atomic<std::uint32_t> g_bulk_lent{0};  // bit k: buffer k is lent
-std::uint32_t g_bulk_slot = 0;               // the slot it was made for
+std::uint32_t g_bulk_attach = 0;             // bp::attach_count() it was made in
 
 bool bulk_ready() {
     bp::Attachment* a = bp::current();
     if (!a) return false;
     int st = g_bulk_state.load(std::memory_order_acquire);
-    if (st == kReady && g_bulk_slot == a->slot) return true;
-    if (st == kMaking || st == kUnavailable) return false;
+    const bool same = g_bulk_attach == bp::attach_count();  // not a segment of an earlier attachment
+    if (st == kMaking || (same && st == kUnavailable)) return false;
+    if (same && st == kReady) return true;
     if (!g_bulk_state.compare_exchange_strong(st, kMaking, std::memory_order_acq_rel)) return false;
+    g_bulk_lent.store(0, std::memory_order_relaxed);
     // A task with global error handling would take -EEXIST or -ENOMEM as
     // an error signal; here they are outcomes.
     const int global = chm_err_global_get();
@@ -60,12 +62,12 @@ bool bulk_ready() {
         }
     }
     if (global) chm_err_global(1);
+    g_bulk_attach = bp::attach_count();
     if (r != 0) {
         g_bulk_state.store(kUnavailable, std::memory_order_release);
         return false;
     }
     g_bulk_base = static_cast<char*>(addr);
-    g_bulk_slot = a->slot;
     g_bulk_state.store(kReady, std::memory_order_release);
     return true;
 }

@@ -42,6 +42,7 @@ struct Job {
 struct Handle {
     int fd = -1;
     std::uint32_t owner = 0;  // token of the client process
+    bool regular = false;     // a regular file: its I/O does not wait on anyone
 };
 
 struct State {
@@ -54,6 +55,7 @@ struct State {
     std::condition_variable cv;
     bool stopping = false;
     std::vector<std::thread> workers;
+    std::vector<char> task_rep;           // the server task's reply buffer
     Client clients[CHM_BP_MAX_SLOTS];
     Handle handles[CHM_XFS_OPEN_MAX * 4];
 };
@@ -160,7 +162,8 @@ int serve(const HostRequest& h, const char* body, std::uint32_t body_len, std::u
             ::close(fd);
             return -EMFILE;
         }
-        *free_slot = Handle{fd, owner};
+        struct stat st;
+        *free_slot = Handle{fd, owner, ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode)};
         return int(free_slot - g->handles);
     }
     case kClose: {
@@ -269,6 +272,53 @@ int serve(const HostRequest& h, const char* body, std::uint32_t body_len, std::u
     return -EPROTO;
 }
 
+// Serve one request and answer it (on a worker, or on the server task for
+// what cannot wait on anyone).
+void answer(xmail::Record* record, std::uint32_t seq, std::uint32_t owner, const char* req, std::uint32_t len,
+            char* rep) {
+    std::uint32_t n = 0;
+    int status = -EINVAL;
+    const char* why = nullptr;
+    if (len >= sizeof(HostRequest)) {
+        HostRequest h;
+        std::memcpy(&h, req, sizeof h);
+        status = serve(h, req + sizeof h, len - std::uint32_t(sizeof h), owner, rep, &n, why);
+    } else {
+        why = "request shorter than its header";
+    }
+    if (status < 0 && why) {  // a refusal's reply is its reason
+        const std::size_t k = std::min<std::size_t>(std::strlen(why), g->room - 1);
+        std::memcpy(rep, why, k);
+        rep[k] = 0;
+        n = std::uint32_t(k + 1);
+    }
+    xmail::finish(record, seq, status, rep, std::min(n, g->room));
+}
+
+// Requests that never wait on anything but the page cache are served on
+// the server task: a hand-over to a worker costs a thread wake-up, the
+// largest part of a small request's round trip. What may wait on another
+// party (an open, which waits for a FIFO's writer; I/O on a pipe, socket
+// or terminal; a program run) goes to a worker.
+bool quick(const HostRequest& h, std::uint32_t owner) {
+    switch (Op(h.op)) {
+    case kStat:
+    case kClose:
+    case kGetcwd:
+    case kGetenv: return true;
+    case kRead:
+    case kWrite:
+    case kSeek:
+    case kFstat: {
+        std::lock_guard<std::mutex> l(g->mu);
+        if (h.fd < 0 || std::size_t(h.fd) >= std::size(g->handles)) return true;  // refused at once
+        const Handle& e = g->handles[h.fd];
+        return e.owner != owner || e.regular;
+    }
+    default: return false;
+    }
+}
+
 void worker_main() {
     sigset_t all;
     sigfillset(&all);
@@ -287,23 +337,7 @@ void worker_main() {
             len = job->len;
             std::memcpy(req.data(), job->req.data(), len);
         }
-        std::uint32_t n = 0;
-        int status = -EINVAL;
-        const char* why = nullptr;
-        if (len >= sizeof(HostRequest)) {
-            HostRequest h;
-            std::memcpy(&h, req.data(), sizeof h);
-            status = serve(h, req.data() + sizeof h, len - std::uint32_t(sizeof h), job->owner, rep.data(), &n, why);
-        } else {
-            why = "request shorter than its header";
-        }
-        if (status < 0 && why) {  // a refusal's reply is its reason
-            const std::size_t k = std::min<std::size_t>(std::strlen(why), g->room - 1);
-            std::memcpy(rep.data(), why, k);
-            rep[k] = 0;
-            n = std::uint32_t(k + 1);
-        }
-        xmail::finish(job->record, job->seq, status, rep.data(), std::min(n, g->room));
+        answer(job->record, job->seq, job->owner, req.data(), len, rep.data());
     }
 }
 
@@ -337,6 +371,10 @@ void take(xmail::Record* r, std::uint32_t seq, std::uint32_t index, const char* 
             c->bulk = static_cast<char*>(addr);
         }
     }
+    if (len >= sizeof h && quick(h, owner)) {
+        answer(r, seq, owner, req, len, g->task_rep.data());
+        return;
+    }
     std::lock_guard<std::mutex> l(g->mu);
     Job& j = g->jobs[index];
     j.record = r;
@@ -360,6 +398,7 @@ int start(const Options& o) {
     g->room = xmail::ring_record_size(*a) - std::uint32_t(sizeof(xmail::Record));
     g->jobs.resize(xmail::ring_capacity(*a));
     for (Job& j : g->jobs) j.req.resize(g->room);
+    g->task_rep.resize(g->room);
     g->queue.reserve(g->jobs.size());
     for (unsigned i = 0; i < (o.workers ? o.workers : 1); ++i) {
         try {

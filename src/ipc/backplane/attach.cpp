@@ -24,6 +24,7 @@ constexpr auto R = std::memory_order_relaxed;
 
 Attachment g_att;
 std::atomic<bool> g_attached{false};
+std::atomic<std::uint32_t> g_attach_count{0};  // attachments made so far (attach_count)
 pthread_mutex_t g_mu = PTHREAD_MUTEX_INITIALIZER;
 pthread_once_t g_once = PTHREAD_ONCE_INIT;
 
@@ -222,6 +223,7 @@ int attach(const char* path, int want, SlotKind kind, const char* name, int* slo
         ::close(a.fd);
         a = Attachment{};
     } else {
+        g_attach_count.fetch_add(1, std::memory_order_relaxed);
         g_attached.store(true, std::memory_order_release);
         if (slot_out) *slot_out = int(slot);
     }
@@ -232,6 +234,8 @@ int attach(const char* path, int want, SlotKind kind, const char* name, int* slo
 }  // namespace
 
 Attachment* current() { return g_attached.load(std::memory_order_acquire) ? &g_att : nullptr; }
+
+std::uint32_t attach_count() { return g_attach_count.load(std::memory_order_relaxed); }
 
 }  // namespace chm::bp
 

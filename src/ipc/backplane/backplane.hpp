@@ -107,6 +107,9 @@ struct Attachment : View {
 // The attachment, or nullptr when this process is not attached. Other IPC
 // subsystems use this; it stays valid until chm_bp_leave.
 Attachment* current();
+// How many attachments this process has made: process memory tied to one
+// attachment (a segment's address) is stale when this has moved on.
+std::uint32_t attach_count();
 
 // -------------------------------------------------------------- the file
 
