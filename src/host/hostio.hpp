@@ -30,6 +30,8 @@ enum Op : std::uint32_t {
     kGetcwd,     // -> reply: path beneath the root, "" at the root
     kGetenv,     // text: name -> reply: value (status -ENOENT: not set)
     kRun,        // text: argv strings; a = argc -> status: exit status
+    kOut,        // text: Entry + text, back to back: lines of the sender's tasks
+    kIn,         // fd = the reading task, b = bytes at most -> reply: console input
     kOpEnd
 };
 
@@ -50,6 +52,34 @@ struct StatReply {
     std::uint32_t pad;
 };
 static_assert(sizeof(StatReply) == 24);
+
+// One piece of console output: a task's line (ending in '\n') or a piece
+// of a longer one, `len` bytes of text following.
+struct Entry {
+    std::uint8_t stream;    // 1 stdout, 2 stderr
+    std::uint8_t pad;
+    std::uint16_t len;
+    std::int32_t tid;
+};
+static_assert(sizeof(Entry) == 8);
+
+// The console socket (<backplane>.console, the host server listens):
+// frames of a Frame header then `len` bytes.
+enum FrameType : std::uint32_t {
+    kFrameOut = 1,    // server -> console: Entry + text, back to back, of RTPU `rtpu`
+    kFrameWant,       // server -> console: task `tid` of RTPU `rtpu` reads stdin
+    kFrameOwn,        // console -> server: data = uint32 mask of slots wanted (0: every free one)
+    kFrameOwned,      // server -> console: data = uint32 mask of slots it now owns
+    kFrameInput,      // console -> server: input for RTPU `rtpu` (len 0: end of file)
+};
+struct Frame {
+    std::uint32_t type;
+    std::uint32_t rtpu;
+    std::int32_t tid;
+    std::uint32_t len;
+};
+static_assert(sizeof(Frame) == 16);
+inline constexpr std::uint32_t kFrameMax = 64 * 1024;
 
 inline constexpr std::uint32_t kBulkSize = 64 * 1024;
 inline constexpr std::uint32_t kBulkBuffers = 2;

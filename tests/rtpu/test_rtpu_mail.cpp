@@ -39,9 +39,10 @@ TEST_F(RtpuTest, TwoRtpusRunAndAnswer) {
     ASSERT_EQ(chm_rtpu_ping(2, &info), 0);
     EXPECT_EQ(info.pid, p2);
     EXPECT_EQ(info.policy, CHM_SCHED_EDF);
-    EXPECT_EQ(info.tasks, 2u);  // the express-mail server and the shutdown task
+    EXPECT_EQ(info.tasks, 3u);  // the express-mail server, the shutdown task and the stdio drainer
     EXPECT_TRUE(has_task(1, "xmail"));
     EXPECT_TRUE(has_task(2, "shutdown"));
+    EXPECT_TRUE(has_task(2, "stdio"));
     EXPECT_NE(read_file(out_of(1)).find("RTPU 1 joined"), std::string::npos);
 
     // Round trip of a ping from this host thread (printed, not asserted).
@@ -139,7 +140,7 @@ TEST_F(RtpuTest, RemoteSpawnFromATaskOnAnotherRtpu) {
     EXPECT_EQ(self, 0);
     EXPECT_EQ(status, 0);
     EXPECT_GE(tid, 0);
-    EXPECT_EQ(n, 3);  // xmail, shutdown, probe.so
+    EXPECT_EQ(n, 4);  // xmail, shutdown, stdio, probe.so
     EXPECT_EQ(found, 1);
     EXPECT_EQ(sig, 0);
     EXPECT_TRUE(wait_text(probe, "main " + std::to_string(p2))) << read_file(probe);

@@ -26,6 +26,7 @@
 #include "chimera/chimera.h"
 #include "chimera/rtpu.h"
 #include "ipc/wake/wake.hpp"
+#include "host/console.hpp"
 #include "host/server/server.hpp"
 #include "ipc/xmail/xmail.hpp"
 #include "port.hpp"
@@ -37,6 +38,7 @@ namespace {
 constexpr int kSignalLine = 63;          // the last IRQ line: programs start from 32
 constexpr int kServerPriority = 1000;    // above ordinary aperiodic work
 constexpr int kShutdownPriority = 10000;
+constexpr int kStdioPriority = 1;        // below every control program's task
 
 void usage(FILE* f) {
     std::fprintf(f,
@@ -65,6 +67,10 @@ void usage(FILE* f) {
         "                  extended file system beneath ROOT and host procedure\n"
         "                  calls to every RTPU's tasks (chimera/xfs.h, host.h)\n"
         "--host-allow-shell  let chm_host_run start a shell (sh, bash...)\n"
+        "--stdio-log       tasks' stdout and stderr go straight to this process's\n"
+        "                  (the log); by default they go line by line through the\n"
+        "                  host server to the console that owns this RTPU, and\n"
+        "                  stdin reads come from that console\n"
         "--programs DIR    load programs (here and by express mail) only from under\n"
         "                  DIR (any number); without it, only files that no one but\n"
         "                  you or root can change (SECURITY.md)\n"
@@ -90,6 +96,7 @@ struct Options {
     std::vector<const char*> program_dirs;  // --programs
     const char* host_root = nullptr;        // --host-server: serve the host from slot 0
     bool allow_shell = false;               // --host-allow-shell
+    bool console_stdio = true;              // --stdio-log: false
 };
 
 [[noreturn]] void bad(const char* fmt, const char* arg) {
@@ -160,6 +167,8 @@ Options parse(int argc, char** argv) {
             if (o.rtpu < 0) o.rtpu = 0;
         } else if (!std::strcmp(a, "--host-allow-shell")) {
             o.allow_shell = true;
+        } else if (!std::strcmp(a, "--stdio-log")) {
+            o.console_stdio = false;
         } else if (!std::strcmp(a, "--")) {
             ++i;
             break;
@@ -332,13 +341,24 @@ int main(int argc, char** argv) {
         std::fprintf(stderr, "chimera-rtpu: RTPU %d: warning: the backplane's ring records are below %d bytes: "
                      "no express mail\n", o.rtpu, CHM_RTPU_RECORD_MIN);
     }
+    const std::string console_socket = std::string(path) + ".console";
     if (o.host_root) {
         chm::host::server::Options ho;
         ho.root = o.host_root;
         ho.allow_shell = o.allow_shell;
+        ho.console_socket = console_socket.c_str();
         if (int r = chm::host::server::start(ho)) return fail("cannot start the host server", r);
     }
     if (int r = setup_shutdown()) return fail("cannot set up the stop signals", r);
+    // Tasks' stdio through the host server to the console (to the log when
+    // no host server answers); the host server's own goes to its log.
+    if (!o.host_root && o.console_stdio) {
+        if (int r = chm::host::console::start(kStdioPriority)) {
+            if (r != -EMSGSIZE) return fail("cannot route stdio to the console", r);
+            std::fprintf(stderr, "chimera-rtpu: RTPU %d: warning: ring records too small for a line: tasks' "
+                         "stdio stays in this log\n", o.rtpu);
+        }
+    }
 
     for (const Program& p : o.programs) {
         std::vector<const char*> args;
@@ -369,6 +389,7 @@ int main(int argc, char** argv) {
 
     const int code = chm_kernel_run();
 
+    chm::host::console::stop();
     chm::host::server::stop();
     chm::xmail::server_stop();
     chm::ipc::wake_unbind_kernel();

@@ -267,6 +267,14 @@ int serve(const HostRequest& h, const char* body, std::uint32_t body_len, std::u
         if (r < 0 && !msg.empty()) why = msg.c_str();
         return r;
     }
+    case kOut:
+        return console_out(bp::token_slot(owner), body, std::min(body_len, h.text_len));
+    case kIn: {
+        const std::uint32_t max = std::uint32_t(std::min<std::uint64_t>(h.b, g->room));
+        const int r = console_in(bp::token_slot(owner), h.fd, owner, rep, max);
+        if (r > 0) *n = std::uint32_t(r);
+        return r;
+    }
     case kOpEnd: break;
     }
     return -EPROTO;
@@ -408,6 +416,12 @@ int start(const Options& o) {
             return -EAGAIN;
         }
     }
+    if (o.console_socket) {
+        if (int e = console_start(o.console_socket)) {
+            stop();
+            return e;
+        }
+    }
     xmail::set_deferred(xmail::kHost, take);
     g->started = true;
     return 0;
@@ -421,6 +435,7 @@ void stop() {
         g->stopping = true;
     }
     run_stop_all();  // a worker waiting for a program would hold the stop
+    console_stop();  // and one waiting for console input
     g->cv.notify_all();
     for (std::thread& t : g->workers) t.join();
     for (Handle& h : g->handles)

@@ -16,6 +16,7 @@ struct Options {
     const char* root = ".";     // every path is resolved beneath it
     bool allow_shell = false;   // chm_host_run may start a shell
     unsigned workers = 6;       // requests served at once
+    const char* console_socket = nullptr;  // where consoles connect (NULL: none)
 };
 
 // On the kernel thread of the process joined as slot 0, after
@@ -47,5 +48,15 @@ const std::string& fs_root();
 
 // Join a client's working directory and a path; -EXDEV for an absolute path.
 int fs_join(const Client& c, const char* path, std::string* out, const char** why);
+
+// Consoles (console.cpp). console_out passes the entries of a kOut request
+// of slot `slot` to the console that owns it (or the server's log): -EINVAL
+// a malformed entry (nothing passed on). console_in waits for input for
+// `slot` (a reading task `tid` of process `owner`): bytes (one line at
+// most), 0 end of file, -ESRCH the reader's process died, -ESHUTDOWN.
+int console_start(const char* socket_path);
+void console_stop();
+int console_out(std::uint32_t slot, const char* text, std::uint32_t len);
+int console_in(std::uint32_t slot, std::int32_t tid, std::uint32_t owner, char* out, std::uint32_t max);
 
 }  // namespace chm::host::server
