@@ -83,11 +83,11 @@ int chm_rtpu_ping(int rtpu, chm_rtpu_info_t* info);
  * is resolved by the target against its own working directory. *tid (may
  * be NULL) receives main's task id on that RTPU.
  * Errors: -EINVAL path NULL or empty, argc < 0, argv NULL with argc > 0;
- * and the target's chm_program_load errors: -ENOENT no such file, -EACCES
- * the target does not trust the file (the reason in chm_rtpu_last_error;
- * the target's log names the requesting slot), -ENOEXEC
- * not a loadable shared object (the loader's words in
- * chm_rtpu_last_error), -ESRCH it has no main, -ENOSPC too many programs,
+ * and the target's chm_program_load errors, with its message ("RTPU n
+ * cannot load FILE: cause") in chm_rtpu_last_error: -ENOENT no such file,
+ * -EACCES the target does not trust the file (the target's log names the
+ * requesting slot), -ENOEXEC not a loadable shared object, one linked
+ * against libchimera, or one without a main, -ENOSPC too many programs,
  * -ENOMEM, -EAGAIN admission refused. */
 int chm_rtpu_spawn(int rtpu, const char* path, int argc, const char* const* argv, chm_tid_t* tid);
 

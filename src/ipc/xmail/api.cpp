@@ -101,8 +101,10 @@ int chm_rtpu_spawn(int rtpu, const char* path, int argc, const char* const* argv
     if (r < 0) {
         if (!chm_rtpu_last_error()[0]) {
             reply[n < sizeof reply - 1 ? n : sizeof reply - 1] = 0;
+            // The loader's message names the file and the cause once.
             const char* why = n > sizeof rep ? reply + sizeof rep : "";
-            set_error("RTPU %d cannot load %s: %s%s%s", rtpu, path, std::strerror(-r), *why ? ": " : "", why);
+            if (*why) set_error("RTPU %d cannot load %s", rtpu, why);
+            else set_error("RTPU %d cannot load %s: %s", rtpu, path, std::strerror(-r));
         }
         return r;
     }
