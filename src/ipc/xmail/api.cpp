@@ -164,6 +164,11 @@ int chm_rtpu_tasks(int rtpu, chm_rtpu_task_t* out, int max, int* total) {
         TasksReply h;
         if (n < sizeof h) return fail(-EPROTO, "short task list reply");
         std::memcpy(&h, reply, sizeof h);
+        if (h.entry_size != sizeof(TaskEntry)) {
+            set_error("RTPU %d lists tasks in %u-byte entries, this library reads %zu-byte ones: chimera-rtpu and "
+                      "this program come from different Chimera versions", rtpu, h.entry_size, sizeof(TaskEntry));
+            return -EPROTO;
+        }
         if (sizeof h + std::size_t(h.count) * sizeof(TaskEntry) > n) return fail(-EPROTO, "bad task list reply");
         if (total) *total = int(h.total);
         for (std::uint32_t i = 0; i < h.count && filled < max; ++i) {
@@ -181,6 +186,12 @@ int chm_rtpu_tasks(int rtpu, chm_rtpu_task_t* out, int max, int* total) {
             o.cpu_ns = e.cpu_ns;
             o.cycles = e.cycles;
             o.misses = e.misses;
+            o.deadline_ns = e.deadline_ns;
+            o.wcet_ns = e.wcet_ns;
+            o.worst_lateness_ns = e.worst_lateness_ns;
+            o.worst_cycle_cpu_ns = e.worst_cycle_cpu_ns;
+            o.stack_size = e.stack_size;
+            o.stack_high_water = e.stack_high_water;
         }
         if (h.next == kTasksEnd || filled >= max) return filled;
         q.start = h.next;
