@@ -68,7 +68,7 @@ TEST_F(Program, BadObjectsAreRefusedAndNothingStaysLoaded) {
     // second copy of the library, saying how to build it instead.
     EXPECT_EQ(chm_program_load(LINKED_PATH, 0, nullptr, nullptr, nullptr), -ENOEXEC);
     const std::string linked = chm_program_error();
-    EXPECT_EQ(linked.rfind(std::string(LINKED_PATH) + " is linked against libchimera.so", 0), 0u) << linked;
+    EXPECT_EQ(linked.rfind(std::string(LINKED_PATH) + ": linked against libchimera.so", 0), 0u) << linked;
     EXPECT_NE(linked.find("pkg-config --cflags chimera"), std::string::npos) << linked;
     // A file that is not a shared object at all: this test's own source.
     EXPECT_EQ(chm_program_load(SOURCE_PATH, 0, nullptr, nullptr, nullptr), -ENOEXEC);

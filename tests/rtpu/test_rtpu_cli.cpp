@@ -109,6 +109,8 @@ TEST_F(CliTest, UnknownRtpuTaskOrProgramGiveOneClearLine) {
         {{"load", "1", NOMAIN_SO}, 1,
          std::string("load: RTPU 1 cannot load ") + NOMAIN_SO + ": no main: a control program defines int main"},
         {{"load", "1", text}, 1, "load: RTPU 1 cannot load " + text + ": "},
+        {{"load", "1", LINKED_SO}, 1,
+         std::string("load: RTPU 1 cannot load ") + LINKED_SO + ": linked against libchimera.so.0: a control program"},
         {{"load", "1"}, 2, "load wants RTPU PROGRAM [ARG...]"},
         {{"kill", "1"}, 2, "kill wants RTPU TASK"},
         {{"kill", "9", "1"}, 1, "RTPU 9 is not running"},

@@ -92,7 +92,7 @@ int chm_rtpu_spawn(int rtpu, const char* path, int argc, const char* const* argv
     for (int i = 0; i < argc; ++i) put(argv[i]);
     const SpawnRequest h{argc, std::uint32_t(off - sizeof h)};
     std::memcpy(req, &h, sizeof h);
-    char reply[512];
+    char reply[1024];  // a record's payload at most (1 KiB records): the loader's whole message
     std::uint32_t n = 0;
     const int r = call(rtpu, kSpawn, req, std::uint32_t(off), reply, sizeof reply - 1, &n, chm_rtpu_timeout());
     std::free(req);

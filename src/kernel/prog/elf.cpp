@@ -104,10 +104,9 @@ int program_needs_libchimera(const char* real, char* why, std::size_t n) {
     ::close(fd);
     if (!found) return 0;
     std::snprintf(why, n,
-                  "%s is linked against %s: a control program or module must not link libchimera, the RTPU "
-                  "provides every chm_* call; rebuild it with the headers only: cc -shared -fPIC prog.c "
-                  "$(pkg-config --cflags chimera) -o prog.so (no --libs), or in meson "
-                  "dependency('chimera').partial_dependency(compile_args : true)",
+                  "%s: linked against %s: a control program or module must not link libchimera (the RTPU "
+                  "provides every chm_* call); build it with the headers only: cc -shared -fPIC prog.c "
+                  "$(pkg-config --cflags chimera) -o prog.so (no --libs)",
                   real, lib);
     return -ENOEXEC;
 }

@@ -13,7 +13,7 @@ namespace chm::kernel {
 // 0, or -ENOENT (no such file) / -EACCES (refused) / -errno with `why`.
 int program_path_check(const char* path, char* real, std::size_t rlen, char* why, std::size_t n);
 
-// elf.cpp: -ENOEXEC with `why` naming the file, the library and the fix
+// elf.cpp: -ENOEXEC with `why` ("FILE: linked against LIB: ...", the fix)
 // when the shared object `real` needs libchimera (DT_NEEDED): the RTPU
 // already carries it. 0 otherwise, also for a file that is no ELF object
 // of this machine's class (dlopen refuses those in its own words).
