@@ -50,12 +50,18 @@ bool is_rtpu(const chm_bp_slot_info_t& s) {
 struct Page {
     std::string text;
     void add(const char* fmt, ...) __attribute__((format(printf, 2, 3))) {
-        char buf[512];
-        va_list ap;
+        va_list ap, again;
         va_start(ap, fmt);
-        const int n = std::vsnprintf(buf, sizeof buf, fmt, ap);
+        va_copy(again, ap);
+        const int n = std::vsnprintf(nullptr, 0, fmt, ap);
         va_end(ap);
-        if (n > 0) text.append(buf, std::size_t(n) < sizeof buf ? std::size_t(n) : sizeof buf - 1);
+        if (n > 0) {
+            const std::size_t at = text.size();
+            text.resize(at + std::size_t(n) + 1);
+            std::vsnprintf(&text[at], std::size_t(n) + 1, fmt, again);
+            text.resize(at + std::size_t(n));
+        }
+        va_end(again);
     }
 };
 
