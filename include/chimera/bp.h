@@ -192,6 +192,37 @@ typedef struct chm_bp_status {
  * nature: each slot is read once). Errors: -EINVAL NULL; -ENOTCONN. */
 int chm_bp_status(chm_bp_status_t* out);
 
+/* Kinds of named objects (chm_bp_object_t.kind). */
+enum chm_bp_object_kind {
+    CHM_BP_OBJ_SHM = 1,    /* shared memory segment (chimera/shm.h) */
+    CHM_BP_OBJ_RSEM = 2,   /* remote semaphore (chimera/rsem.h) */
+    CHM_BP_OBJ_MSGQ = 3,   /* message queue (chimera/msgq.h) */
+    CHM_BP_OBJ_SVARS = 4   /* the state-variable table (chimera/svar.h) */
+};
+
+/* One named object of the backplane, as its registry entry says. */
+typedef struct chm_bp_object {
+    char name[CHM_BP_NAME_MAX + 1];
+    uint32_t kind;      /* enum chm_bp_object_kind (another number: a kind
+                         * this version does not know) */
+    int32_t where;      /* -1: common memory; else the RTPU slot whose local
+                         * window holds it */
+    uint32_t size;      /* bytes of storage */
+    int32_t creator;    /* slot of the process that created it (-1: unknown) */
+    uint32_t attached;  /* bit s: the process in slot s has it open */
+} chm_bp_object_t;
+
+/* The live named objects of the attached backplane, in registry order: up
+ * to `max` go into out[]. Returns how many were filled (>= 0); *total (may
+ * be NULL) receives how many are live. Each entry is read whole (retried
+ * while a process changes it); an entry whose kind, name or place no
+ * process could have made is left out (the file is untrusted: open an
+ * object with its subsystem's call to have it validated). Racy by nature:
+ * objects created or destroyed meanwhile may be missed.
+ * Errors: -EINVAL max < 0, or out NULL with max > 0; -ENOTCONN not
+ * attached. */
+int chm_bp_objects(chm_bp_object_t* out, int max, int* total);
+
 #ifdef __cplusplus
 }
 #endif

@@ -3,9 +3,17 @@
  * an ordinary `int main(int argc, char** argv)`; the RTPU loads it and
  * spawns its main as a task. Its code is preemptible like the RTPU's own.
  *
- * Build one with meson: shared_module('myprog', 'myprog.c',
- * dependencies : dependency('chimera')), or with
- * cc -shared -fPIC myprog.c $(pkg-config --cflags --libs chimera).
+ * Build one against the headers only, without linking libchimera: the
+ * RTPU process (chimera-rtpu) carries libchimera and resolves every chm_*
+ * call of the program against itself, and the loader refuses an object
+ * that names libchimera among the libraries it needs (a second copy would
+ * be a second kernel nobody initialised):
+ *
+ *   cc -shared -fPIC -Wall -Wextra myprog.c $(pkg-config --cflags chimera) -o myprog.so
+ *
+ * or with meson: shared_module('myprog', 'myprog.c', name_prefix : '',
+ * dependencies : dependency('chimera').partial_dependency(compile_args :
+ * true, includes : true)).
  *
  * A standalone program may instead link the kernel directly and call
  * chm_kernel_init / chm_task_spawn / chm_kernel_run itself. */
@@ -26,11 +34,12 @@ extern "C" {
  * (if not NULL) is main's task and the return value is the program's
  * number (>= 0). Call from the kernel thread before chm_kernel_run or from
  * a task.
- * Errors (nothing stays loaded): -EINVAL path NULL or argc < 0 or argv
- * NULL with argc > 0; -EPERM the kernel is not initialised; -ENOENT no such
- * file; -EACCES the file is not trusted (chm_program_error() says why: see
- * below); -ENOEXEC not a loadable shared object (the loader's message is in
- * chm_program_error()); -ESRCH the object has no `main`; -ENOSPC
+ * Errors (nothing stays loaded; chm_program_error() names the file and the
+ * cause, once): -EINVAL path NULL or empty, argc < 0, or argv NULL with
+ * argc > 0; -EPERM the kernel is not initialised; -ENOENT no such file;
+ * -EACCES the file is not trusted (see below); -ENOEXEC not a loadable
+ * shared object (the dynamic loader's words), one linked against
+ * libchimera (see above), or one without a main of its own; -ENOSPC
  * CHM_PROGRAM_MAX programs loaded; -ENOMEM; chm_task_spawn's errors.
  *
  * Which files load: the path is resolved (every symbolic link followed) and
@@ -60,7 +69,8 @@ int chm_program_trust_dir(const char* dir);
  * -EINVAL no such program. */
 int chm_program_status(int program, int* status);
 
-/* The last loading error's text (the dynamic loader's own words), or "". */
+/* The last loading error's text, "FILE: cause" (for a file the dynamic
+ * loader refused, its own words), or "" after a load that succeeded. */
 const char* chm_program_error(void);
 
 #ifdef __cplusplus

@@ -53,7 +53,9 @@ typedef struct chm_rtpu_info {
     uint64_t uptime_ns;            /* since its server started */
 } chm_rtpu_info_t;
 
-/* One task of an RTPU, as chm_rtpu_tasks lists it. */
+/* One task of an RTPU, as chm_rtpu_tasks lists it: the figures of
+ * chm_task_status (chimera/task.h) on that RTPU, read when its server
+ * served the page. */
 typedef struct chm_rtpu_task {
     chm_tid_t id;
     char name[CHM_TASK_NAME_MAX + 1];
@@ -64,6 +66,13 @@ typedef struct chm_rtpu_task {
     uint64_t cpu_ns;         /* CPU time consumed */
     uint64_t cycles;         /* cycles completed */
     uint64_t misses;         /* deadline misses */
+    uint64_t deadline_ns;    /* relative deadline (periodic tasks; 0 otherwise) */
+    uint64_t wcet_ns;        /* declared CPU estimate per cycle (0: none) */
+    uint64_t worst_lateness_ns;  /* worst completion after its deadline (0: never late) */
+    uint64_t worst_cycle_cpu_ns; /* most CPU time one cycle took */
+    uint64_t stack_size;         /* bytes */
+    uint64_t stack_high_water;   /* most stack it ever used, bytes: from its top
+                                  * down to the deepest byte ever written */
 } chm_rtpu_task_t;
 
 /* Set the time every later call of this process waits for a reply
@@ -83,11 +92,11 @@ int chm_rtpu_ping(int rtpu, chm_rtpu_info_t* info);
  * is resolved by the target against its own working directory. *tid (may
  * be NULL) receives main's task id on that RTPU.
  * Errors: -EINVAL path NULL or empty, argc < 0, argv NULL with argc > 0;
- * and the target's chm_program_load errors: -ENOENT no such file, -EACCES
- * the target does not trust the file (the reason in chm_rtpu_last_error;
- * the target's log names the requesting slot), -ENOEXEC
- * not a loadable shared object (the loader's words in
- * chm_rtpu_last_error), -ESRCH it has no main, -ENOSPC too many programs,
+ * and the target's chm_program_load errors, with its message ("RTPU n
+ * cannot load FILE: cause") in chm_rtpu_last_error: -ENOENT no such file,
+ * -EACCES the target does not trust the file (the target's log names the
+ * requesting slot), -ENOEXEC not a loadable shared object, one linked
+ * against libchimera, or one without a main, -ENOSPC too many programs,
  * -ENOMEM, -EAGAIN admission refused. */
 int chm_rtpu_spawn(int rtpu, const char* path, int argc, const char* const* argv, chm_tid_t* tid);
 
@@ -111,7 +120,9 @@ int chm_rtpu_destroy(int rtpu, chm_tid_t task);
  * how many tasks the RTPU has. Long lists take several requests (one ring
  * record each), all within one timeout; tasks that start or end meanwhile
  * may be missed or seen once. Errors: -EINVAL out NULL with max > 0, or
- * max < 0. */
+ * max < 0; -EPROTO the RTPU's entries are of another size than this
+ * library's (chimera-rtpu from another Chimera version), or a malformed
+ * reply. */
 int chm_rtpu_tasks(int rtpu, chm_rtpu_task_t* out, int max, int* total);
 
 /* Stop RTPU `rtpu` gracefully: it replies, then calls

@@ -56,13 +56,27 @@ TEST_F(Program, MainRunsAsATaskWithItsArgumentsAndIsPreemptible) {
 
 TEST_F(Program, BadObjectsAreRefusedAndNothingStaysLoaded) {
     start(CHM_SCHED_MUF, false);
+    // Each message names the file and the cause, once.
     EXPECT_EQ(chm_program_load("/no/such/program.so", 0, nullptr, nullptr, nullptr), -ENOENT);
-    EXPECT_EQ(chm_program_load(NOMAIN_PATH, 0, nullptr, nullptr, nullptr), -ESRCH);
-    EXPECT_NE(std::string(chm_program_error()), "");
+    EXPECT_EQ(std::string(chm_program_error()), "/no/such/program.so: No such file or directory");
+    EXPECT_EQ(chm_program_load(NOMAIN_PATH, 0, nullptr, nullptr, nullptr), -ENOEXEC);
+    EXPECT_EQ(std::string(chm_program_error()).rfind(std::string(NOMAIN_PATH) + ": no main", 0), 0u)
+        << chm_program_error();
+    EXPECT_NE(std::string(chm_program_error()).find("int main(int argc, char** argv)"), std::string::npos)
+        << chm_program_error();
+    // Linked against libchimera: refused before dlopen could load a
+    // second copy of the library, saying how to build it instead.
+    EXPECT_EQ(chm_program_load(LINKED_PATH, 0, nullptr, nullptr, nullptr), -ENOEXEC);
+    const std::string linked = chm_program_error();
+    EXPECT_EQ(linked.rfind(std::string(LINKED_PATH) + ": linked against libchimera.so", 0), 0u) << linked;
+    EXPECT_NE(linked.find("pkg-config --cflags chimera"), std::string::npos) << linked;
     // A file that is not a shared object at all: this test's own source.
     EXPECT_EQ(chm_program_load(SOURCE_PATH, 0, nullptr, nullptr, nullptr), -ENOEXEC);
-    EXPECT_NE(std::string(chm_program_error()).find(SOURCE_PATH), std::string::npos)
-        << chm_program_error();
+    {
+        const std::string e = chm_program_error();
+        EXPECT_EQ(e.find(SOURCE_PATH), 0u) << e;
+        EXPECT_EQ(e.find(SOURCE_PATH, 1), std::string::npos) << "the file named twice: " << e;
+    }
     EXPECT_EQ(chm_program_load(nullptr, 0, nullptr, nullptr, nullptr), -EINVAL);
     EXPECT_EQ(chm_program_load(CTLPROG_PATH, 2, nullptr, nullptr, nullptr), -EINVAL);
     EXPECT_EQ(chm_task_count(), 0);

@@ -102,12 +102,15 @@ TEST_F(RtpuTest, SpawnErrorsNameTheProblem) {
     ASSERT_TRUE(wait_serving(1, p1));
     const std::string missing = dir_ + "/missing.so";
     EXPECT_EQ(chm_rtpu_spawn(1, missing.c_str(), 0, nullptr, nullptr), -ENOENT);
-    EXPECT_NE(std::string(chm_rtpu_last_error()).find("missing.so"), std::string::npos) << chm_rtpu_last_error();
+    // The file and the cause, once each.
+    EXPECT_EQ(std::string(chm_rtpu_last_error()), "RTPU 1 cannot load " + missing + ": No such file or directory");
     const std::string text = dir_ + "/text.so";
     { std::ofstream(text) << "not an ELF file\n"; }
     EXPECT_EQ(chm_rtpu_spawn(1, text.c_str(), 0, nullptr, nullptr), -ENOEXEC);
     EXPECT_NE(std::string(chm_rtpu_last_error()).find("text.so"), std::string::npos) << chm_rtpu_last_error();
-    EXPECT_EQ(chm_rtpu_spawn(1, NOMAIN_SO, 0, nullptr, nullptr), -ESRCH);
+    EXPECT_EQ(chm_rtpu_spawn(1, NOMAIN_SO, 0, nullptr, nullptr), -ENOEXEC);
+    EXPECT_EQ(std::string(chm_rtpu_last_error()).rfind(std::string("RTPU 1 cannot load ") + NOMAIN_SO + ": no main", 0),
+              0u) << chm_rtpu_last_error();
     EXPECT_EQ(chm_rtpu_spawn(1, nullptr, 0, nullptr, nullptr), -EINVAL);
     EXPECT_EQ(chm_rtpu_spawn(1, PROBE_SO, 1, nullptr, nullptr), -EINVAL);
     // A request that cannot fit one 1 KiB record.

@@ -246,7 +246,10 @@ TEST_F(SecurityTest, TheDefaultPathIsInADirectoryOfTheUsersAlone) {
     r = run({CHIMERA_BIN, "stop"});
     EXPECT_EQ(r.status, 0) << r.err;
     std::string log = read_file(bp + ".rtpu1.log");
-    EXPECT_EQ(count_lines(log), 4) << log;  // joined, stopped, joined, stopped
+    // Each start's mark, joined, stopped; twice: the first run's lines kept.
+    EXPECT_EQ(count_lines(log), 6) << log;
+    EXPECT_EQ(log.find("chimera start: "), 0u) << log;
+    EXPECT_NE(log.find("chimera start: ", 1), std::string::npos) << log;
     // A log that is a symbolic link (to a file someone wants overwritten):
     // the start is refused before any RTPU runs, the target untouched.
     const std::string victim = dir_ + "/victim";

@@ -322,6 +322,7 @@ int main(int argc, char** argv) {
     cfg.idle_poll_ns = std::uint64_t(o.idle_poll_us) * 1000u;
     auto fail = [&](const char* what, int r) {
         std::fprintf(stderr, "chimera-rtpu: RTPU %d: %s: %s\n", o.rtpu, what, std::strerror(-r));
+        chm::host::console::stop();
         chm::host::server::stop();
         chm::xmail::server_stop();
         chm::ipc::wake_unbind_kernel();
@@ -366,8 +367,10 @@ int main(int argc, char** argv) {
         const int r = chm_program_load(p.path.c_str(), int(args.size()), args.data(), nullptr, nullptr);
         if (r < 0) {
             const char* why = chm_program_error();
-            std::fprintf(stderr, "chimera-rtpu: RTPU %d: cannot load %s: %s%s%s\n", o.rtpu, p.path.c_str(),
-                         std::strerror(-r), *why ? ": " : "", why);
+            if (*why) std::fprintf(stderr, "chimera-rtpu: RTPU %d: cannot load %s\n", o.rtpu, why);
+            else std::fprintf(stderr, "chimera-rtpu: RTPU %d: cannot load %s: %s\n", o.rtpu, p.path.c_str(),
+                              std::strerror(-r));
+            chm::host::console::stop();
             chm::host::server::stop();
             chm::xmail::server_stop();
             chm::ipc::wake_unbind_kernel();

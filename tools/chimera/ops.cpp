@@ -1,4 +1,4 @@
-// chimera status / stop / rm (cmd.hpp).
+// chimera stop / rm, and what the subcommands share (cmd.hpp).
 #include <cerrno>
 #include <csignal>
 #include <cstdarg>
@@ -45,19 +45,42 @@ std::string log_path(const std::string& backplane, int n) {
 
 namespace {
 
-const char* state_name(chm_bp_slot_state s) {
-    static const char* const kNames[] = {"FREE", "JOINING", "RUNNING", "LEAVING", "DEAD", "RECOVERING"};
-    return unsigned(s) < 6 ? kNames[s] : "?";
+bool is_rtpu(const chm_bp_slot_info_t& s) {
+    return s.kind == CHM_BP_KIND_RTPU &&
+           (s.state == CHM_BP_RUNNING || s.state == CHM_BP_JOINING || s.state == CHM_BP_LEAVING);
 }
 
-const char* task_state(chm_task_state s) {
-    static const char* const kNames[] = {"ready", "running", "blocked", "suspended", "waitperiod", "paused", "ended"};
-    return unsigned(s) < 7 ? kNames[s] : "?";
+// The live members of a mapped table (cmd.hpp, live_members).
+std::string describe_live(const chm::bp::View& v, bool rtpus_only) {
+    std::string live;
+    for (std::uint32_t s = 0; s < v.slots(); ++s) {
+        const chm::bp::RtpuEntry* e = v.rtpu(s);
+        const auto state = chm::bp::status_state(e->status.load());
+        if (state == chm::bp::SlotState::Free || state == chm::bp::SlotState::Dead) continue;
+        const bool host = e->kind.load() == 2;
+        if (rtpus_only && host) continue;
+        const int pid = int(e->pid.load());
+        if (!chm::bp::proc_alive(pid, e->pid_start)) continue;
+        live += (live.empty() ? "" : ", ") + std::string(host ? "host " : "RTPU ") + std::to_string(s) + " (pid " +
+                std::to_string(pid) + ")";
+    }
+    return live;
 }
 
-const char* policy_name(chm_sched_policy p) {
-    static const char* const kNames[] = {"MUF", "RM", "EDF", "MLF", "FIXED", "user"};
-    return unsigned(p) < 6 ? kNames[p] : "?";
+}  // namespace
+
+std::string live_members(const std::string& path, bool rtpus_only, std::string* error) {
+    chm::bp::View v;
+    int fd = -1;
+    char why[768];
+    if (chm::bp::map_file(path.c_str(), false, &v, &fd, why, sizeof why, true) != 0) {
+        if (error) *error = why;
+        return "";
+    }
+    const std::string live = describe_live(v, rtpus_only);
+    chm::bp::unmap(&v);
+    ::close(fd);
+    return live;
 }
 
 // Attach to the backplane as a host for the length of one command.
@@ -73,41 +96,6 @@ int attach(const Options& o) {
     return 0;
 }
 
-bool is_rtpu(const chm_bp_slot_info_t& s) {
-    return s.kind == CHM_BP_KIND_RTPU &&
-           (s.state == CHM_BP_RUNNING || s.state == CHM_BP_JOINING || s.state == CHM_BP_LEAVING);
-}
-
-void print_tasks(int slot) {
-    chm_rtpu_info_t info;
-    if (int r = chm_rtpu_ping(slot, &info)) {
-        std::printf("    (no reply: %s)\n", chm_rtpu_last_error()[0] ? chm_rtpu_last_error() : std::strerror(-r));
-        return;
-    }
-    static chm_rtpu_task_t tasks[512];
-    int total = 0;
-    const int n = chm_rtpu_tasks(slot, tasks, 512, &total);
-    if (n < 0) {
-        std::printf("    (no task list: %s)\n", chm_rtpu_last_error());
-        return;
-    }
-    std::printf("    %s, %d task%s, up %.1f s, %u requests served\n", policy_name(info.policy), total,
-                total == 1 ? "" : "s", double(info.uptime_ns) / 1e9, info.served);
-    std::printf("    %-8s %-20s %-10s %6s %9s %10s %10s %7s\n", "TID", "NAME", "STATE", "PRIO", "PERIOD",
-                "CPU ms", "CYCLES", "MISSES");
-    for (int i = 0; i < n; ++i) {
-        const chm_rtpu_task_t& t = tasks[i];
-        char period[32] = "-";
-        if (t.period_ns) std::snprintf(period, sizeof period, "%.3gms", double(t.period_ns) / 1e6);
-        std::printf("    %-8d %-20s %-10s %6d %9s %10.1f %10llu %7llu\n", int(t.id), t.name, task_state(t.state),
-                    t.priority, period, double(t.cpu_ns) / 1e6, static_cast<unsigned long long>(t.cycles),
-                    static_cast<unsigned long long>(t.misses));
-    }
-    if (total > n) std::printf("    ... %d more\n", total - n);
-}
-
-}  // namespace
-
 bool file_fit_to_use(const std::string& path) {
     // Who may attach it first (a file we must not trust is not even read),
     // then the whole table and every object in it, naming the field.
@@ -122,57 +110,7 @@ bool file_fit_to_use(const std::string& path) {
     return true;
 }
 
-int cmd_status(const Options& o) {
-    // Nothing is shown of a table that fails validation.
-    struct stat ls{};
-    if (lstat(o.backplane.c_str(), &ls) == 0 && !file_fit_to_use(o.backplane)) return 1;
-    if (attach(o)) return 1;
-    chm_bp_status_t st;
-    chm_bp_status(&st);
-    timespec now{};
-    clock_gettime(CLOCK_REALTIME, &now);
-    const double age = double(std::uint64_t(now.tv_sec) * 1000000000ull + std::uint64_t(now.tv_nsec) - st.created_ns) / 1e9;
-    std::printf("backplane %s: %u slots, created %.0f s ago, %u/%u named objects, common memory %u of %u bytes free, "
-                "%u recoveries\n",
-                o.backplane.c_str(), st.slots, age, st.objects, st.registry_capacity, st.common_free, st.common_size,
-                st.recoveries);
-    std::printf("%-5s %-5s %-11s %-8s %-10s %s\n", "SLOT", "KIND", "STATE", "PID", "HEARTBEAT", "NAME");
-    int rtpus = 0;
-    for (std::uint32_t s = 0; s < st.slots; ++s) {
-        const chm_bp_slot_info_t& i = st.slot[s];
-        if (i.state == CHM_BP_FREE || int(s) == st.self) continue;
-        char hb[32] = "-";
-        if (i.pid) std::snprintf(hb, sizeof hb, "%u ms", i.heartbeat_age_ms);
-        std::printf("%-5u %-5s %-11s %-8d %-10s %s\n", s,
-                    i.kind == CHM_BP_KIND_RTPU ? "rtpu" : i.kind == CHM_BP_KIND_HOST ? "host" : "-",
-                    state_name(i.state), int(i.pid), hb, i.name);
-        if (is_rtpu(i)) ++rtpus;
-    }
-    if (rtpus == 0) std::printf("no RTPU running\n");
-    // A dead RTPU is the one thing on this page that needs a person: say
-    // which it was and how it ended, not just a state word in the table.
-    for (std::uint32_t s = 0; s < st.slots; ++s) {
-        const chm_bp_slot_info_t& i = st.slot[s];
-        if (i.kind != CHM_BP_KIND_RTPU) continue;
-        if (i.state == CHM_BP_DEAD)
-            std::printf("RTPU %u (%s) died: its process ended without leaving the backplane (killed or crashed); "
-                        "the backplane recovered its slot\n", s, i.name);
-        else if (i.state == CHM_BP_RECOVERING)
-            std::printf("RTPU %u (%s) died: its process ended without leaving the backplane; recovery in progress\n",
-                        s, i.name);
-    }
-    for (std::uint32_t s = 0; s < st.slots; ++s) {
-        const chm_bp_slot_info_t& i = st.slot[s];
-        if (!is_rtpu(i) || i.state != CHM_BP_RUNNING) continue;
-        std::printf("RTPU %u (%s, pid %d):\n", s, i.name, int(i.pid));
-        print_tasks(int(s));
-    }
-    std::fflush(stdout);
-    chm_bp_leave();
-    return 0;
-}
-
-int stop_attached(double timeout_s, bool quiet, int* refused_out) {
+int stop_attached(double timeout_s, bool quiet, int* refused_out, int only) {
     chm_bp_status_t st;
     chm_bp_status(&st);
     struct Victim {
@@ -187,7 +125,7 @@ int stop_attached(double timeout_s, bool quiet, int* refused_out) {
     std::vector<Victim> v;
     int refused = 0;
     for (std::uint32_t s = 0; s < st.slots; ++s)
-        if (is_rtpu(st.slot[s]) && st.slot[s].pid > 0) {
+        if (is_rtpu(st.slot[s]) && st.slot[s].pid > 0 && (only < 0 || int(s) == only)) {
             const std::uint32_t word = chm::bp::current()->rtpu(s)->status.load();
             const int r = chm::bp::signal_member(s, chm::bp::MemberTarget::Process, SIGTERM, word);
             if (r == -EPERM) {
@@ -279,16 +217,7 @@ int cmd_rm(const Options& o) {
         return 1;
     }
     if (r == 0) {
-        std::string live;
-        for (std::uint32_t s = 0; s < v.slots(); ++s) {
-            const chm::bp::RtpuEntry* e = v.rtpu(s);
-            const auto state = chm::bp::status_state(e->status.load());
-            if (state == chm::bp::SlotState::Free || state == chm::bp::SlotState::Dead) continue;
-            const int pid = int(e->pid.load());
-            if (!chm::bp::proc_alive(pid, e->pid_start)) continue;
-            live += (live.empty() ? "" : ", ") + std::string(e->kind.load() == 2 ? "host " : "RTPU ") +
-                    std::to_string(s) + " (pid " + std::to_string(pid) + ")";
-        }
+        const std::string live = describe_live(v, false);
         chm::bp::unmap(&v);
         ::close(fd);
         if (!live.empty() && !o.force) {

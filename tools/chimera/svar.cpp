@@ -71,31 +71,6 @@ int fail(const char* what) {
     return 1;
 }
 
-int list() {
-    const int n = chm_svar_count();
-    if (n < 0) return fail("svar list");
-    if (n == 0) std::printf("no state variables declared\n");
-    else std::printf("%-20s %-7s %-9s %-8s %-16s %10s  %s\n", "name", "type", "shape", "unit", "writer", "writes", "value");
-    for (int k = 0; k < n; ++k) {
-        chm_svar_info_t i;
-        if (chm_svar_info_at(k, &i)) return fail("svar list");
-        std::vector<unsigned char> v(i.bytes);
-        std::string value;
-        if (chm_svar_get(i.name, v.data(), v.size()) == 0) {
-            const std::size_t elems = std::size_t(i.rows) * i.cols;
-            for (std::size_t e = 0; e < elems && e < 6; ++e) value += (e ? " " : "") + element(i, v.data(), e);
-            if (elems > 6) value += " ...";
-        } else {
-            value = "(unreadable)";
-        }
-        char shape[24];
-        std::snprintf(shape, sizeof shape, "%ux%u", i.rows, i.cols);
-        std::printf("%-20s %-7s %-9s %-8s %-16s %10u  %s\n", i.name, kTypes[i.type], shape, i.unit,
-                    i.has_writer ? i.writer : "-", i.writes, value.c_str());
-    }
-    return 0;
-}
-
 int get(const char* name) {
     chm_svar_info_t i;
     if (chm_svar_info(name, &i)) return fail("svar get");
@@ -154,6 +129,31 @@ int declare(const std::vector<const char*>& a) {
 
 }  // namespace
 
+int svar_list() {
+    const int n = chm_svar_count();
+    if (n < 0) return fail("svar list");
+    if (n == 0) std::printf("no state variables declared\n");
+    else std::printf("%-20s %-7s %-9s %-8s %-16s %10s  %s\n", "name", "type", "shape", "unit", "writer", "writes", "value");
+    for (int k = 0; k < n; ++k) {
+        chm_svar_info_t i;
+        if (chm_svar_info_at(k, &i)) return fail("svar list");
+        std::vector<unsigned char> v(i.bytes);
+        std::string value;
+        if (chm_svar_get(i.name, v.data(), v.size()) == 0) {
+            const std::size_t elems = std::size_t(i.rows) * i.cols;
+            for (std::size_t e = 0; e < elems && e < 6; ++e) value += (e ? " " : "") + element(i, v.data(), e);
+            if (elems > 6) value += " ...";
+        } else {
+            value = "(unreadable)";
+        }
+        char shape[24];
+        std::snprintf(shape, sizeof shape, "%ux%u", i.rows, i.cols);
+        std::printf("%-20s %-7s %-9s %-8s %-16s %10u  %s\n", i.name, kTypes[i.type], shape, i.unit,
+                    i.has_writer ? i.writer : "-", i.writes, value.c_str());
+    }
+    return 0;
+}
+
 int cmd_svar(const Options& o, const std::vector<const char*>& args) {
     if (args.empty()) {
         say("svar wants a subcommand: list, get NAME, set NAME V..., declare NAME TYPE RxC [UNIT]");
@@ -183,7 +183,7 @@ int cmd_svar(const Options& o, const std::vector<const char*>& args) {
         return 1;
     }
     int r;
-    if (sub == "list") r = list();
+    if (sub == "list") r = svar_list();
     else if (sub == "get") r = get(rest[0]);
     else if (sub == "set") r = set(rest[0], std::vector<const char*>(rest.begin() + 1, rest.end()));
     else r = declare(rest);

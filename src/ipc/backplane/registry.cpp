@@ -13,6 +13,7 @@
 #include <cerrno>
 #include <cstring>
 
+#include "chimera/bp.h"
 #include "ipc/backplane/backplane.hpp"
 
 namespace chm::bp {
@@ -274,3 +275,54 @@ void registry_repair_locked(const View& v, std::uint32_t me) {
 }
 
 }  // namespace chm::bp
+
+// ------------------------------------------------- the public walk (bp.h)
+
+extern "C" int chm_bp_objects(chm_bp_object_t* out, int max, int* total) {
+    using namespace chm::bp;
+    if (max < 0 || (max > 0 && !out)) {
+        set_error("chm_bp_objects: %s", max < 0 ? "max < 0" : "out is NULL");
+        return -EINVAL;
+    }
+    const Attachment* a = current();
+    if (!a) {
+        set_error("chm_bp_objects: not attached to a backplane");
+        return -ENOTCONN;
+    }
+    // Each entry is copied between two even, equal `seq` reads (a change in
+    // progress is retried), and what it says is checked before it is
+    // passed on: the file is shared with every process that may write it.
+    int filled = 0, live = 0;
+    for (std::uint32_t i = 0; i < a->geo().registry_capacity; ++i) {
+        const RegistryEntry* e = a->entry(i);
+        bool ok = false;
+        chm_bp_object_t o{};
+        std::uint32_t where = 0, owner = 0;
+        for (int tries = 0; tries < 100 && !ok; ++tries) {
+            const std::uint32_t s1 = e->seq.load(std::memory_order_acquire);
+            if (s1 & 1) continue;
+            if (state_of(e) != EntryState::Live) break;
+            read_name(e, o.name);
+            o.kind = e->kind.load(R);
+            o.size = e->size.load(R);
+            where = e->where.load(R);
+            owner = e->owner.load(R);
+            o.attached = e->attached.load(R);
+            std::atomic_thread_fence(std::memory_order_acquire);
+            ok = e->seq.load(R) == s1;
+        }
+        if (!ok) continue;  // free, or changing for 100 reads: not a live object now
+        if (o.kind == kKindNone || o.kind >= kKindMax || !o.name[0] ||
+            (where != kWhereCommon && where >= a->slots()))
+            continue;  // not an object any process could have made: not shown
+        o.where = where == kWhereCommon ? -1 : int32_t(where);
+        const std::uint32_t creator = token_slot(owner);
+        o.creator = owner && creator < a->slots() ? int32_t(creator) : -1;
+        const std::uint32_t slot_mask = a->slots() >= 32 ? 0xFFFFFFFFu : (1u << a->slots()) - 1;
+        o.attached &= slot_mask;
+        ++live;
+        if (filled < max) out[filled++] = o;
+    }
+    if (total) *total = live;
+    return filled;
+}

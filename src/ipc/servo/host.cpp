@@ -233,13 +233,18 @@ int spawn(const SpawnReq& q, const ParamOverride* params, const char* path, Ref*
     if (!m) return std::snprintf(why, n, "%d modules already", CHM_SERVO_MODULES_MAX), -ENOSPC;
     char real[PATH_MAX];
     if (int e = kernel::program_path_check(path, real, sizeof real, why, n)) return e;
+    if (int e = kernel::program_needs_libchimera(real, why, n)) return e;
     m->index = int(m - g_mods);
     m->used = true;
     m->gen = ++g_gen;
     std::snprintf(m->name, sizeof m->name, "%s", q.name);
     m->dl = dlopen(real, RTLD_NOW | RTLD_LOCAL);
     if (!m->dl) {
-        std::snprintf(why, n, "%s", dlerror());
+        const char* d = dlerror();
+        if (!d) d = "dlopen failed";
+        // Named once: dlerror may or may not start with the file.
+        std::snprintf(why, n, "%s%s%s", std::strncmp(d, real, std::strlen(real)) ? real : "",
+                      std::strncmp(d, real, std::strlen(real)) ? ": " : "", d);
         unload(m);
         return -ENOEXEC;
     }

@@ -92,7 +92,7 @@ int chm_rtpu_spawn(int rtpu, const char* path, int argc, const char* const* argv
     for (int i = 0; i < argc; ++i) put(argv[i]);
     const SpawnRequest h{argc, std::uint32_t(off - sizeof h)};
     std::memcpy(req, &h, sizeof h);
-    char reply[512];
+    char reply[1024];  // a record's payload at most (1 KiB records): the loader's whole message
     std::uint32_t n = 0;
     const int r = call(rtpu, kSpawn, req, std::uint32_t(off), reply, sizeof reply - 1, &n, chm_rtpu_timeout());
     std::free(req);
@@ -101,8 +101,10 @@ int chm_rtpu_spawn(int rtpu, const char* path, int argc, const char* const* argv
     if (r < 0) {
         if (!chm_rtpu_last_error()[0]) {
             reply[n < sizeof reply - 1 ? n : sizeof reply - 1] = 0;
+            // The loader's message names the file and the cause once.
             const char* why = n > sizeof rep ? reply + sizeof rep : "";
-            set_error("RTPU %d cannot load %s: %s%s%s", rtpu, path, std::strerror(-r), *why ? ": " : "", why);
+            if (*why) set_error("RTPU %d cannot load %s", rtpu, why);
+            else set_error("RTPU %d cannot load %s: %s", rtpu, path, std::strerror(-r));
         }
         return r;
     }
@@ -162,6 +164,11 @@ int chm_rtpu_tasks(int rtpu, chm_rtpu_task_t* out, int max, int* total) {
         TasksReply h;
         if (n < sizeof h) return fail(-EPROTO, "short task list reply");
         std::memcpy(&h, reply, sizeof h);
+        if (h.entry_size != sizeof(TaskEntry)) {
+            set_error("RTPU %d lists tasks in %u-byte entries, this library reads %zu-byte ones: chimera-rtpu and "
+                      "this program come from different Chimera versions", rtpu, h.entry_size, sizeof(TaskEntry));
+            return -EPROTO;
+        }
         if (sizeof h + std::size_t(h.count) * sizeof(TaskEntry) > n) return fail(-EPROTO, "bad task list reply");
         if (total) *total = int(h.total);
         for (std::uint32_t i = 0; i < h.count && filled < max; ++i) {
@@ -179,6 +186,12 @@ int chm_rtpu_tasks(int rtpu, chm_rtpu_task_t* out, int max, int* total) {
             o.cpu_ns = e.cpu_ns;
             o.cycles = e.cycles;
             o.misses = e.misses;
+            o.deadline_ns = e.deadline_ns;
+            o.wcet_ns = e.wcet_ns;
+            o.worst_lateness_ns = e.worst_lateness_ns;
+            o.worst_cycle_cpu_ns = e.worst_cycle_cpu_ns;
+            o.stack_size = e.stack_size;
+            o.stack_high_water = e.stack_high_water;
         }
         if (h.next == kTasksEnd || filled >= max) return filled;
         q.start = h.next;

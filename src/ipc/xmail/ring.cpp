@@ -25,7 +25,7 @@ constexpr auto Rel = std::memory_order_release;
 // one slice even when the reply's wake-up cannot reach the sender.
 constexpr std::int64_t kSliceNs = 20'000'000;
 
-thread_local char t_error[256];
+thread_local char t_error[768];  // room for a loader message that names a long path
 
 std::uint64_t now_ns() { return port::now_ns(); }
 

@@ -140,7 +140,7 @@ int do_tasks(const char* req, std::uint32_t len, char* rep, std::uint32_t* n) {
             ids[count++] = kernel::tid_of(&t);
         }
     }
-    TasksReply h{total, next, 0, 0};
+    TasksReply h{total, next, 0, sizeof(TaskEntry)};
     char* out = rep + sizeof h;
     for (std::uint32_t i = 0; i < count; ++i) {
         chm_task_status_t st;
@@ -154,6 +154,12 @@ int do_tasks(const char* req, std::uint32_t len, char* rep, std::uint32_t* n) {
         e.cpu_ns = st.cpu_ns;
         e.cycles = st.cycles;
         e.misses = st.misses;
+        e.deadline_ns = st.deadline_ns;
+        e.wcet_ns = st.wcet_ns;
+        e.worst_lateness_ns = st.worst_lateness_ns;
+        e.worst_cycle_cpu_ns = st.worst_cycle_cpu_ns;
+        e.stack_size = st.stack_size;
+        e.stack_high_water = st.stack_high_water;
         std::memcpy(e.name, st.name, sizeof e.name);
         e.name[CHM_TASK_NAME_MAX] = 0;
         std::memcpy(out + std::size_t(h.count) * sizeof e, &e, sizeof e);

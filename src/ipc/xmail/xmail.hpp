@@ -96,21 +96,30 @@ struct TasksRequest {
     std::uint32_t start;  // first task slot to look at
     std::uint32_t max;    // entries wanted at most
 };
+// One task of the list (chm_rtpu_task_t's figures). Its size travels in
+// TasksReply::entry_size, so a sender and a server built from different
+// versions of this struct refuse each other's pages (-EPROTO) instead of
+// reading one layout as the other. 80 bytes until the worst-case figures
+// were added.
 struct TaskEntry {
     std::int32_t id;
     std::uint32_t state;
     std::int32_t priority;
     std::uint32_t critical;
     std::uint64_t period_ns, cpu_ns, cycles, misses;
+    std::uint64_t deadline_ns, wcet_ns;   // relative deadline, CPU estimate per cycle
+    std::uint64_t worst_lateness_ns;      // worst completion after the deadline
+    std::uint64_t worst_cycle_cpu_ns;     // worst CPU time of one cycle
+    std::uint64_t stack_size, stack_high_water;  // bytes
     char name[CHM_TASK_NAME_MAX + 1];
 };
-static_assert(sizeof(TaskEntry) == 80);
+static_assert(sizeof(TaskEntry) == 128);
 // TasksReply, then `count` TaskEntry.
 struct TasksReply {
     std::uint32_t total;  // tasks alive
     std::uint32_t next;   // slot to ask for next; kTasksEnd: that was all
     std::uint32_t count;
-    std::uint32_t pad;
+    std::uint32_t entry_size;  // sizeof(TaskEntry) of the server (0 before it was sent)
 };
 inline constexpr std::uint32_t kTasksEnd = 0xFFFFFFFFu;
 

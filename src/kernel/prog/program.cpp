@@ -2,6 +2,7 @@
 // spawn main(argc, argv). Programs stay loaded until chm_kernel_fini (a
 // task spawned by main may still run their code after main returns).
 #include <cerrno>
+#include <cstdarg>
 #include <climits>
 #include <cstdio>
 #include <cstring>
@@ -35,6 +36,17 @@ char g_error[768];
 
 void set_error(const char* what) {
     std::snprintf(g_error, sizeof g_error, "%s", what ? what : "");
+}
+
+// "PATH: cause", the file named once, and `e` returned.
+int refuse(int e, const char* path, const char* fmt, ...) __attribute__((format(printf, 3, 4)));
+int refuse(int e, const char* path, const char* fmt, ...) {
+    const int k = std::snprintf(g_error, sizeof g_error, "%s: ", path ? path : "(null)");
+    va_list ap;
+    va_start(ap, fmt);
+    if (k > 0 && std::size_t(k) < sizeof g_error) std::vsnprintf(g_error + k, sizeof g_error - std::size_t(k), fmt, ap);
+    va_end(ap);
+    return e;
 }
 
 // argv as main expects it, in one block the program owns.
@@ -88,12 +100,16 @@ extern "C" {
 int chm_program_load(const char* path, int argc, const char* const* argv,
                      const chm_task_attr_t* attr, chm_tid_t* out_main) {
     set_error(nullptr);
-    if (!path || argc < 0 || (argc > 0 && !argv)) return -EINVAL;
-    if (!g_k.initialised) return -EPERM;
+    if (!path || !*path) return refuse(-EINVAL, path, "no program path");
+    if (argc < 0 || (argc > 0 && !argv)) return refuse(-EINVAL, path, "argc %d with argv %s", argc, argv ? "set" : "NULL");
+    if (!g_k.initialised) return refuse(-EPERM, path, "the kernel is not initialised (chm_kernel_init first)");
     // The file dlopen gets is the one checked: every link resolved, and no
-    // one but us or root can change it or the directories above it.
+    // one but us or root can change it or the directories above it. The
+    // check's message names the file and the cause.
     char real[PATH_MAX];
     if (int e = program_path_check(path, real, sizeof real, g_error, sizeof g_error)) return e;
+    // A program linked against libchimera would bring a second copy of it.
+    if (int e = program_needs_libchimera(real, g_error, sizeof g_error)) return e;
     Program* p = nullptr;
     for (Program& q : g_programs) {
         if (!q.used) {
@@ -101,12 +117,18 @@ int chm_program_load(const char* path, int argc, const char* const* argv,
             break;
         }
     }
-    if (!p) return -ENOSPC;
+    if (!p) return refuse(-ENOSPC, real, "%d programs are loaded already (CHM_PROGRAM_MAX)", CHM_PROGRAM_MAX);
     p->used = true;
     // RTLD_LOCAL: two programs may both define helpers of the same name.
     p->handle = dlopen(real, RTLD_NOW | RTLD_LOCAL);
     if (!p->handle) {
-        set_error(dlerror());
+        // dlerror names the program ("PATH: invalid ELF header") or only
+        // a library it needs ("libx.so: cannot open shared object file"):
+        // the file is named once either way.
+        const char* d = dlerror();
+        if (!d) d = "dlopen failed";
+        if (std::strncmp(d, real, std::strlen(real)) == 0) set_error(d);
+        else refuse(0, real, "%s", d);
         *p = Program{};
         return -ENOEXEC;
     }
@@ -117,21 +139,22 @@ int chm_program_load(const char* path, int argc, const char* const* argv,
         dlinfo(p->handle, RTLD_DI_LINKMAP, &lm) != 0 || !lm || info.dli_fname != lm->l_name) {
         // No main of its own (dlsym may find the executable's through a
         // dependency): refuse rather than run somebody else's.
-        set_error("no main() in the program");
+        refuse(0, real, "no main: a control program defines int main(int argc, char** argv) (the symbol main "
+                        "is missing%s)", p->main ? " from the object itself: the one found belongs to another" : "");
         p->main = nullptr;
         unload(p);
-        return -ESRCH;
+        return -ENOEXEC;
     }
     p->argc = argc;
     p->argv = copy_args(argc, argv);
     if (!p->argv) {
         unload(p);
-        return -ENOMEM;
+        return refuse(-ENOMEM, real, "no memory for its arguments");
     }
     {
         IrqGuard guard;
         if (port::preemptible_object_add(reinterpret_cast<const void*>(p->main)) < 0) {
-            set_error("cannot find the program's code segments");
+            refuse(0, real, "loaded, but its code segments were not found (its code is not preemptible)");
         }
     }
     chm_task_attr_t a;
@@ -149,7 +172,7 @@ int chm_program_load(const char* path, int argc, const char* const* argv,
     chm_tid_t tid = CHM_TID_NONE;
     if (int e = chm_task_spawn(&tid, run_main, p, &a)) {
         unload(p);
-        return e;
+        return refuse(e, real, "cannot start main as a task: %s", std::strerror(-e));
     }
     p->task = tid;
     if (out_main) *out_main = tid;

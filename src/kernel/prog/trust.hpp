@@ -1,4 +1,4 @@
-// Which files an RTPU may load as programs (trust.cpp).
+// Which files an RTPU may load as programs (trust.cpp, elf.cpp).
 #pragma once
 
 #include <cstddef>
@@ -12,5 +12,11 @@ namespace chm::kernel {
 // write (a sticky directory above an entry of ours or root's is fine).
 // 0, or -ENOENT (no such file) / -EACCES (refused) / -errno with `why`.
 int program_path_check(const char* path, char* real, std::size_t rlen, char* why, std::size_t n);
+
+// elf.cpp: -ENOEXEC with `why` ("FILE: linked against LIB: ...", the fix)
+// when the shared object `real` needs libchimera (DT_NEEDED): the RTPU
+// already carries it. 0 otherwise, also for a file that is no ELF object
+// of this machine's class (dlopen refuses those in its own words).
+int program_needs_libchimera(const char* real, char* why, std::size_t n);
 
 }  // namespace chm::kernel
