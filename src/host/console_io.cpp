@@ -9,8 +9,9 @@
 //
 // A printing task never waits on the host: it waits only when the queue
 // (32 KiB) is full, until the drainer has made room. Outside a task (the
-// kernel thread before chm_kernel_run, other threads) and when no host
-// server answers, text goes to the RTPU's log as before.
+// kernel thread before chm_kernel_run, other threads), when no host server
+// answers and when no console owns this RTPU, text goes to the RTPU's log
+// as before.
 #include "host/console.hpp"
 
 #include <cerrno>
@@ -194,7 +195,8 @@ void drain(void*) {
             HostRequest h{};
             h.op = kOut;
             if (request(h, batch, n, nullptr, 0, nullptr, "console output", 0) < 0) {
-                // No host server: the lines go to the log, none lost.
+                // No host server, or no console owns this RTPU: the lines
+                // go to the log, none lost.
                 for (std::uint32_t off = 0; off + sizeof(Entry) <= n;) {
                     Entry e;
                     std::memcpy(&e, batch + off, sizeof e);

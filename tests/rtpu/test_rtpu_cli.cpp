@@ -265,7 +265,8 @@ TEST_F(CliTest, StartRefusesARunningSystemAndKeepsItsLog) {
     const pid_t pid = st.slot[1].pid;
     r = chimera({"start", "--rtpus", "2"});
     EXPECT_EQ(r.status, 1);
-    EXPECT_TRUE(contains(r.err, "is already running (RTPU 1 (pid " + std::to_string(pid) + "))")) << r.err;
+    EXPECT_TRUE(contains(r.err, "is already running (the host server (pid ")) << r.err;
+    EXPECT_TRUE(contains(r.err, ", RTPU 1 (pid " + std::to_string(pid) + "))")) << r.err;
     EXPECT_EQ(count_lines(r.err), 1) << r.err;
     EXPECT_EQ(read_file(log), before);  // not truncated, not even appended to
     EXPECT_FALSE(access((bp_ + ".rtpu2.log").c_str(), F_OK) == 0);  // nothing was started

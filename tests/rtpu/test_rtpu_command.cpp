@@ -40,13 +40,15 @@ TEST_F(RtpuTest, ChimeraStartStatusStopRmRoundTrip) {
     // started (test_rtpu_cli.cpp checks the logs).
     r = chimera({"start", "--rtpus", "1"});
     EXPECT_EQ(r.status, 1);
-    EXPECT_TRUE(contains(r.err, "is already running (RTPU 1 (pid")) << r.err;
+    EXPECT_TRUE(contains(r.err, "is already running (the host server (pid")) << r.err;
+    EXPECT_TRUE(contains(r.err, ", RTPU 1 (pid")) << r.err;
     EXPECT_TRUE(exists(bp_));  // not ours to remove
 
     // rm refuses while RTPUs run.
     r = chimera({"rm"});
     EXPECT_EQ(r.status, 1);
-    EXPECT_TRUE(contains(r.err, "in use by RTPU 1")) << r.err;
+    EXPECT_TRUE(contains(r.err, "in use by the host server (pid")) << r.err;
+    EXPECT_TRUE(contains(r.err, ", RTPU 1 (pid")) << r.err;
 
     r = chimera({"stop"});
     ASSERT_EQ(r.status, 0) << r.err;

@@ -30,6 +30,9 @@ struct StartPlan {
     bool log_terminal = false;
     int group = -1;  // gid for a new backplane
     std::vector<std::vector<std::string>> programs;  // per RTPU: chimera-rtpu's program arguments
+    bool host_server = true;   // slot 0: chimera-rtpu --host-server host_root
+    std::string host_root;     // absolute; default the current directory
+    bool allow_shell = false;  // --host-allow-shell
 };
 
 // Print "chimera: <message>" on stderr.

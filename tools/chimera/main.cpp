@@ -46,7 +46,8 @@ void usage(FILE* f) {
         "usage: chimera start   [--backplane PATH] [--rtpus N] [--program RTPU:PATH[:ARG...]]...\n"
         "                       [--policy muf|rm|edf|mlf|fixed] [--rt-priority P] [--pin]\n"
         "                       [--lock-memory] [--idle-poll US] [--log-terminal] [--timeout S]\n"
-        "                       [--group NAME] [--programs DIR]...\n"
+        "                       [--group NAME] [--programs DIR]... [--host-root DIR]\n"
+        "                       [--no-host-server] [--host-allow-shell]\n"
         "       chimera status  [--backplane PATH] [--watch [--interval S] [--count N | --once]]\n"
         "       chimera load    [--backplane PATH] RTPU PROGRAM [ARG...]\n"
         "       chimera kill    [--backplane PATH] RTPU TASK\n"
@@ -72,7 +73,11 @@ void usage(FILE* f) {
         "        number) lets the RTPUs load programs only from under those\n"
         "        directories (otherwise: files that only you or root can change).\n"
         "        A backplane that is a link, not a regular file, not yours, or\n"
-        "        writable by others is refused (see SECURITY.md).\n"
+        "        writable by others is refused (see SECURITY.md). The host server\n"
+        "        (slot 0, log PATH.host.log) serves tasks' host files beneath DIR\n"
+        "        (--host-root, default the current directory) and host calls, and\n"
+        "        carries their stdio to `chimera console`; --no-host-server leaves\n"
+        "        it out (tasks' output then stays in the RTPU logs)\n"
         "status  the RTPU table and each running RTPU's tasks (through express mail):\n"
         "        CPU share, cycles, misses, worst lateness past the deadline, worst\n"
         "        CPU of one cycle, stack high-water mark; per RTPU the utilisation of\n"
@@ -226,6 +231,20 @@ int main(int argc, char** argv) {
             plan.rtpu_options.insert(plan.rtpu_options.end(), {"--programs", real});
         } else if (a == "--log-terminal" && starting) {
             plan.log_terminal = true;
+        } else if (a == "--host-root" && starting) {
+            const char* v = value();
+            char real[PATH_MAX];
+            struct stat st{};
+            if (!realpath(v, real) || stat(real, &st) != 0) {
+                say("--host-root %s: %s", v, std::strerror(errno));
+                return 1;
+            }
+            if (!S_ISDIR(st.st_mode)) bad(std::string("--host-root ") + v + ": not a directory");
+            plan.host_root = real;
+        } else if (a == "--no-host-server" && starting) {
+            plan.host_server = false;
+        } else if (a == "--host-allow-shell" && starting) {
+            plan.allow_shell = true;
         } else if (a == "--force" && cmd == "rm") {
             o.force = true;
         } else if (a == "--rtpu" && cmd == "stop") {
@@ -271,6 +290,14 @@ int main(int argc, char** argv) {
         if (plan.programs.size() > std::size_t(plan.rtpus))
             bad("--program for RTPU " + std::to_string(plan.programs.size()) + " but only " +
                 std::to_string(plan.rtpus) + " RTPUs are started (--rtpus)");
+        if (plan.host_root.empty()) {
+            char cwd[PATH_MAX];
+            if (!getcwd(cwd, sizeof cwd)) {
+                say("cannot read the current directory (the host server's root): %s", std::strerror(errno));
+                return 1;
+            }
+            plan.host_root = cwd;
+        }
         return cmd_start(o, plan);
     }
     if (cmd == "path") {

@@ -40,6 +40,7 @@ void nap_ms(unsigned ms) {
 }
 
 std::string log_path(const std::string& backplane, int n) {
+    if (n == 0) return backplane + ".host.log";  // the host server's
     return backplane + ".rtpu" + std::to_string(n) + ".log";
 }
 
@@ -61,8 +62,8 @@ std::string describe_live(const chm::bp::View& v, bool rtpus_only) {
         if (rtpus_only && host) continue;
         const int pid = int(e->pid.load());
         if (!chm::bp::proc_alive(pid, e->pid_start)) continue;
-        live += (live.empty() ? "" : ", ") + std::string(host ? "host " : "RTPU ") + std::to_string(s) + " (pid " +
-                std::to_string(pid) + ")";
+        const std::string who = s == 0 && !host ? "the host server" : std::string(host ? "host " : "RTPU ") + std::to_string(s);
+        live += (live.empty() ? "" : ", ") + who + " (pid " + std::to_string(pid) + ")";
     }
     return live;
 }
@@ -247,7 +248,15 @@ int cmd_rm(const Options& o) {
         }
         closedir(d);
     }
-    std::printf("removed %s%s\n", path, logs ? " and its RTPU logs" : "");
+    // The host server's log and a console socket a killed server left.
+    for (const char* tail : {".host.log", ".console"}) {
+        const std::string f = p + tail;
+        struct stat ls{};
+        if (lstat(f.c_str(), &ls) == 0 && ls.st_uid == geteuid() && (S_ISREG(ls.st_mode) || S_ISSOCK(ls.st_mode)) &&
+            unlink(f.c_str()) == 0)
+            ++logs;
+    }
+    std::printf("removed %s%s\n", path, logs ? " and its logs" : "");
     return 0;
 }
 

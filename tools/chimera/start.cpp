@@ -95,10 +95,16 @@ int open_log(const std::string& log) {
 
 pid_t launch(const Options& o, const StartPlan& p, int n, const std::string& bin, int log_fd) {
     std::vector<std::string> args = {bin, "--backplane", o.backplane, "--rtpu", std::to_string(n)};
-    if (!p.policy.empty()) args.insert(args.end(), {"--policy", p.policy});
-    args.insert(args.end(), p.rtpu_options.begin(), p.rtpu_options.end());
-    if (p.pin) args.insert(args.end(), {"--cpu", std::to_string(nth_allowed_cpu(n - 1))});
-    if (std::size_t(n) <= p.programs.size() && !p.programs[std::size_t(n) - 1].empty()) {
+    if (n == 0) {
+        args.insert(args.end(), {"--host-server", p.host_root});
+        if (p.allow_shell) args.push_back("--host-allow-shell");
+    }
+    // The host server does the host's blocking work: no real-time
+    // priority, pinning or programs of its own.
+    if (!p.policy.empty() && n > 0) args.insert(args.end(), {"--policy", p.policy});
+    if (n > 0) args.insert(args.end(), p.rtpu_options.begin(), p.rtpu_options.end());
+    if (p.pin && n > 0) args.insert(args.end(), {"--cpu", std::to_string(nth_allowed_cpu(n - 1))});
+    if (n > 0 && std::size_t(n) <= p.programs.size() && !p.programs[std::size_t(n) - 1].empty()) {
         args.push_back("--");
         for (const std::string& a : p.programs[std::size_t(n) - 1]) args.push_back(a);
     }
@@ -168,8 +174,11 @@ int cmd_start(const Options& o, const StartPlan& p) {
         created = true;
     }
     const std::string bin = find_rtpu_binary();
+    // Slot 0 is the host server (extended file system, host calls, the
+    // consoles' stdio), started first so the RTPUs' output finds it.
+    const int first = p.host_server ? 0 : 1;
     std::vector<int> logs(std::size_t(p.rtpus) + 1, -1);
-    for (int n = 1; n <= p.rtpus && !p.log_terminal; ++n) {
+    for (int n = first; n <= p.rtpus && !p.log_terminal; ++n) {
         if ((logs[std::size_t(n)] = open_log(log_path(o.backplane, n))) >= 0) {
             // Appended after what an earlier run wrote: mark where this one starts.
             char line[96];
@@ -186,7 +195,7 @@ int cmd_start(const Options& o, const StartPlan& p) {
         return 1;
     }
     std::vector<pid_t> pids(std::size_t(p.rtpus) + 1, 0);
-    for (int n = 1; n <= p.rtpus; ++n) {
+    for (int n = first; n <= p.rtpus; ++n) {
         pids[std::size_t(n)] = launch(o, p, n, bin, logs[std::size_t(n)]);
         if (logs[std::size_t(n)] >= 0) close(logs[std::size_t(n)]);
     }
@@ -206,8 +215,8 @@ int cmd_start(const Options& o, const StartPlan& p) {
     std::vector<bool> ready(pids.size(), false);
     chm_rtpu_timeout_set(200'000'000);
     bool warned = false;
-    for (int waiting = p.rtpus; failure.empty() && waiting > 0;) {
-        for (int n = 1; n <= p.rtpus && failure.empty(); ++n) {
+    for (int waiting = p.rtpus + 1 - first; failure.empty() && waiting > 0;) {
+        for (int n = first; n <= p.rtpus && failure.empty(); ++n) {
             if (ready[std::size_t(n)]) continue;
             int ws = 0;
             if (waitpid(pids[std::size_t(n)], &ws, WNOHANG) == pids[std::size_t(n)]) {
@@ -216,7 +225,7 @@ int cmd_start(const Options& o, const StartPlan& p) {
                 if (why.empty())
                     why = WIFSIGNALED(ws) ? std::string("killed by ") + strsignal(WTERMSIG(ws))
                                           : "exit status " + std::to_string(WEXITSTATUS(ws));
-                failure = "RTPU " + std::to_string(n) + " failed to start: " + why;
+                failure = (n ? "RTPU " + std::to_string(n) : std::string("the host server")) + " failed to start: " + why;
                 break;
             }
             chm_bp_status(&st);
@@ -244,6 +253,9 @@ int cmd_start(const Options& o, const StartPlan& p) {
         std::printf("started %d RTPU%s on %s:", p.rtpus, p.rtpus == 1 ? "" : "s", o.backplane.c_str());
         for (int n = 1; n <= p.rtpus; ++n) std::printf(" %d (pid %d)", n, int(pids[std::size_t(n)]));
         std::printf("\n");
+        if (p.host_server)
+            std::printf("host server: pid %d, files beneath %s; chimera console attaches a terminal\n",
+                        int(pids[0]), p.host_root.c_str());
         if (!p.log_terminal) std::printf("logs: %s\n", log_path(o.backplane, 1).c_str());
         std::fflush(stdout);
         chm_bp_leave();
@@ -266,7 +278,7 @@ int cmd_start(const Options& o, const StartPlan& p) {
     chm_bp_leave();
     if (created) {
         unlink(o.backplane.c_str());
-        for (int n = 1; n <= p.rtpus; ++n) unlink(log_path(o.backplane, n).c_str());
+        for (int n = first; n <= p.rtpus; ++n) unlink(log_path(o.backplane, n).c_str());
     }
     return 1;
 }

@@ -2,9 +2,9 @@
 // backplane file (mode 0600, in the backplane's private directory) where
 // `chimera console` processes connect. Each console owns some RTPUs: their
 // tasks' output lines (kOut) go to it, and their stdin reads (kIn) wait for
-// the input it sends. Output of an RTPU no console owns goes to the host
-// server's own stdout (its log), prefixed with the RTPU; a console that
-// stops reading for a second is dropped, so no task ever waits on it.
+// the input it sends. Output of an RTPU no console owns is refused
+// (-ENOTCONN), and the RTPU writes it to its own log; a console that stops
+// reading for a second is dropped, so no task ever waits on it.
 #include <algorithm>
 #include <cerrno>
 #include <chrono>
@@ -237,16 +237,8 @@ int console_out(std::uint32_t slot, const char* text, std::uint32_t len) {
             drop(std::size_t(k - c->consoles.data()));
         }
     }
-    // Nobody's: the server's log, each line prefixed with its RTPU.
-    for (std::uint32_t off = 0; off < len;) {
-        Entry e;
-        std::memcpy(&e, text + off, sizeof e);
-        std::string line = "[rtpu " + std::to_string(slot) + "] " + std::string(text + off + sizeof e, e.len);
-        std::fwrite(line.data(), 1, line.size(), e.stream == 2 ? stderr : stdout);
-        off += sizeof e + e.len;
-    }
-    std::fflush(stdout);
-    return 0;
+    // No console owns it: the sender keeps the lines in its own log.
+    return -ENOTCONN;
 }
 
 int console_in(std::uint32_t slot, std::int32_t tid, std::uint32_t owner, char* out, std::uint32_t max) {

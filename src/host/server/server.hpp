@@ -50,7 +50,7 @@ const std::string& fs_root();
 int fs_join(const Client& c, const char* path, std::string* out, const char** why);
 
 // Consoles (console.cpp). console_out passes the entries of a kOut request
-// of slot `slot` to the console that owns it (or the server's log): -EINVAL
+// of slot `slot` to the console that owns it; -ENOTCONN none does; -EINVAL
 // a malformed entry (nothing passed on). console_in waits for input for
 // `slot` (a reading task `tid` of process `owner`): bytes (one line at
 // most), 0 end of file, -ESRCH the reader's process died, -ESHUTDOWN.
