@@ -153,6 +153,11 @@ TEST_F(CmdiPty, LoopSuggestsCompletesRecallsAndSavesHistory) {
         ASSERT_TRUE(t.read_until("status")) << t.seen;
         ASSERT_TRUE(t.read_until("stop")) << t.seen;
         t.type("\025");  // ^U: kill the line
+        // Past the first word: file names.
+        std::ofstream(dir + "/script.cmd") << "status\n";
+        t.type("source " + dir + "/scr\t");
+        ASSERT_TRUE(t.read_until("ipt.cmd")) << t.seen;
+        t.type("\025");
     } else {
         t.type("status\r");
         ASSERT_TRUE(t.read_until("status: all well")) << t.seen;
