@@ -221,7 +221,9 @@ int chm_cmdi_print_async(chm_cmdi_t* c, const char* text);
 int chm_cmdi_interactive_end(chm_cmdi_t* c);
 
 /* Ask the session (or the script) running c's lines to stop after the
- * current line, as the built-in quit does. Errors: -EINVAL NULL c. */
+ * current line, as the built-in quit does; called between lines, the
+ * next chm_cmdi_interactive_step returns 1 without reading. Errors:
+ * -EINVAL NULL c. */
 int chm_cmdi_quit(chm_cmdi_t* c);
 
 #ifdef __cplusplus

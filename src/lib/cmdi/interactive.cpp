@@ -262,6 +262,8 @@ int chm_cmdi_interactive_step(chm_cmdi_t* c) {
     if (!c) return -EINVAL;
     if (g_session != c) return no_session(c, "chm_cmdi_interactive_step");
     return guarded(c, [&] {
+        // chm_cmdi_quit between lines ends the session too, without a read.
+        if (c->quit) c->session.done = true;
         if (c->session.done) return 1;
 #ifdef CHM_CMDI_LIBEDIT
         if (c->session.editing) {
