@@ -9,14 +9,14 @@ FUZZ_SECONDS ?= 300
 MESON_TEST  ?= meson test --print-errorlogs --num-processes 2
 
 PKGS_BUILD = meson ninja-build g++ pkg-config python3 libgtest-dev libgmock-dev \
-             libboost-dev libboost-context-dev libeigen3-dev libtomlplusplus-dev
+             libboost-dev libboost-context-dev libeigen3-dev libtomlplusplus-dev libedit-dev
 PKGS_CROSS = g++-m68k-linux-gnu libc6-dev-m68k-cross \
              g++-aarch64-linux-gnu libc6-dev-arm64-cross qemu-user
 PKGS_BENCH = libbenchmark-dev rt-tests python3-matplotlib
 # clang's -fsanitize=fuzzer links libclang_rt.fuzzer, which Debian 12
 # ships in libclang-rt-14-dev (libfuzzer-14-dev is the standalone copy).
 PKGS_FUZZ  = clang libclang-rt-14-dev
-FUZZ_TARGETS = fuzz_backplane fuzz_msgq fuzz_xmail fuzz_args fuzz_config fuzz_servo
+FUZZ_TARGETS = fuzz_backplane fuzz_msgq fuzz_xmail fuzz_args fuzz_config fuzz_servo fuzz_cmdi
 
 .PHONY: all deps deps-cross deps-bench deps-fuzz build demo demo-loop demo-multi stress test test-native test-m68k \
         test-aarch64 test-fuzz fuzz fuzz-seeds bench clean
@@ -94,7 +94,7 @@ test-aarch64: deps deps-cross build-aarch64/build.ninja
 $(BUILD_FUZZ)/build.ninja:
 	CC=clang CXX=clang++ meson setup $(BUILD_FUZZ) -Dfuzz=true
 
-# Each harness briefly (suite fuzz: 60 + 20 + 15 + 10 + 20 s, two at a time).
+# Each harness briefly (suite fuzz: 60 + 20 + 15 + 10 + 20 + 15 + 15 s, two at a time).
 test-fuzz: deps-fuzz $(BUILD_FUZZ)/build.ninja
 	ninja -C $(BUILD_FUZZ) $(FUZZ_TARGETS:%=tests/fuzz/%)
 	$(MESON_TEST) -C $(BUILD_FUZZ) --suite fuzz --no-rebuild

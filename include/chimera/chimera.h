@@ -4,6 +4,7 @@
 #define CHIMERA_H
 
 #include "chimera/bp.h"
+#include "chimera/cmdi.h"
 #include "chimera/config.h"
 #include "chimera/dev.h"
 #include "chimera/err.h"
