@@ -20,11 +20,12 @@
 
 #include "../private_dir.hpp"
 #include "cmdi_test.hpp"
+#include "../pty_driver.hpp"
 
 namespace {
 
-// Under qemu (the cross builds) everything is slower.
-constexpr int kWaitMs = 20000;
+using chm::test::kWaitMs;
+using chm::test::Pty;
 
 int status_cmd(chm_cmdi_t* c, int, char**, void*) { return chm_cmdi_printf(c, "status: all well\n") > 0 ? 0 : 1; }
 
@@ -36,77 +37,6 @@ chm_cmdi_t* child_interpreter(const std::string& history) {
         _exit(20);
     return c;
 }
-
-struct Pty {
-    pid_t pid = -1;
-    int master = -1;
-    std::string seen;      // everything the terminal showed
-    std::size_t mark = 0;  // where the next read_until starts looking
-
-    ~Pty() {
-        if (pid > 0) {
-            kill(pid, SIGKILL);
-            waitpid(pid, nullptr, 0);
-        }
-        if (master >= 0) close(master);
-    }
-
-    // Fork a child on a new 80x24 terminal running body(); false if forkpty failed.
-    template <typename F>
-    bool start(F body) {
-        winsize ws{};
-        ws.ws_row = 24;
-        ws.ws_col = 80;
-        pid = forkpty(&master, nullptr, nullptr, &ws);
-        if (pid == 0) {
-            setenv("TERM", "xterm", 1);
-            _exit(body());
-        }
-        return pid > 0;
-    }
-
-    // Read what the terminal shows until `want` appears after the mark
-    // (then the mark moves past it) or kWaitMs passes.
-    bool read_until(const std::string& want) {
-        const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(kWaitMs);
-        for (;;) {
-            const std::size_t at = seen.find(want, mark);
-            if (at != std::string::npos) {
-                mark = at + want.size();
-                return true;
-            }
-            const auto left =
-                std::chrono::duration_cast<std::chrono::milliseconds>(end - std::chrono::steady_clock::now()).count();
-            if (left <= 0) return false;
-            pollfd p{master, POLLIN, 0};
-            if (poll(&p, 1, static_cast<int>(left)) <= 0) continue;
-            char buf[4096];
-            const ssize_t n = read(master, buf, sizeof buf);
-            if (n <= 0) return seen.find(want, mark) != std::string::npos;  // the child is gone
-            seen.append(buf, static_cast<std::size_t>(n));
-        }
-    }
-
-    void type(const std::string& keys) { ASSERT_EQ(write(master, keys.data(), keys.size()), ssize_t(keys.size())); }
-
-    // The child's exit status, reaped within kWaitMs (-1: it did not end).
-    int wait_exit() {
-        const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(kWaitMs);
-        while (std::chrono::steady_clock::now() < end) {
-            int st = 0;
-            if (waitpid(pid, &st, WNOHANG) == pid) {
-                pid = -1;
-                return WIFEXITED(st) ? WEXITSTATUS(st) : 100 + WTERMSIG(st);
-            }
-            char buf[4096];
-            pollfd p{master, POLLIN, 0};
-            if (poll(&p, 1, 20) <= 0) continue;
-            const ssize_t n = read(master, buf, sizeof buf);
-            if (n > 0) seen.append(buf, static_cast<std::size_t>(n));
-        }
-        return -1;
-    }
-};
 
 std::string slurp(const std::string& path) {
     std::ifstream in(path);

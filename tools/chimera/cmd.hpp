@@ -65,6 +65,8 @@ int cmd_rm(const Options& o);
 int cmd_load(const Options& o, const std::vector<const char*>& args);
 int cmd_kill(const Options& o, const std::vector<const char*>& args);
 int cmd_stop_one(const Options& o);
+// `chimera console [--rtpus LIST] [--script FILE]` (console.cpp).
+int cmd_console(const Options& o, const std::vector<const char*>& args);
 // `chimera objects` (objects.cpp).
 int cmd_objects(const Options& o);
 // `chimera svar SUBCOMMAND ARGS...` (svar.cpp); `args` starts with the subcommand.

@@ -55,6 +55,7 @@ void usage(FILE* f) {
         "       chimera stop    [--backplane PATH] [--rtpu N] [--timeout S]\n"
         "       chimera rm      [--backplane PATH] [--force]\n"
         "       chimera path    [--backplane PATH]\n"
+        "       chimera console [--backplane PATH] [--rtpus N,M...] [--script FILE]\n"
         "       chimera svar    [--backplane PATH] list | get NAME | set NAME V... |\n"
         "                       declare NAME TYPE RxC [UNIT] | plan CONFIG\n"
         "\n"
@@ -99,6 +100,13 @@ void usage(FILE* f) {
         "rm      remove the backplane file and its RTPU logs; refuses while processes\n"
         "        are attached or when the file is not a backplane, unless --force\n"
         "path    print the backplane path these commands use (for scripts)\n"
+        "console a terminal for the RTPUs given (default: every one no other console\n"
+        "        owns): their tasks' output, lines prefixed [N]; commands load, tasks,\n"
+        "        kill, stop, fg, rtpus, help, source, history, quit (line editing and\n"
+        "        history, a mistyped command gets the closest match); one RTPU owns\n"
+        "        stdin (fg N): the next line typed while its task reads goes to it,\n"
+        "        a reader on another RTPU waits (\"Waiting for TTY Input\"); --script\n"
+        "        runs FILE's commands first\n"
         "svar    the state-variable table: list every variable with its writer and\n"
         "        value, get one, set a set-point (refused while a module writes it),\n"
         "        or declare one (TYPE double, float, int32, uint32 or bool; shape\n"
@@ -155,11 +163,11 @@ int main(int argc, char** argv) {
         usage(stdout);
         return 0;
     }
-    static const char* const kCommands[] = {"start", "status", "load", "kill", "objects", "stop", "rm", "path", "svar"};
+    static const char* const kCommands[] = {"start", "status", "load", "kill", "objects", "stop", "rm", "path", "svar", "console"};
     bool known = false;
     for (const char* c : kCommands) known = known || cmd == c;
     if (!known)
-        bad("unknown command \"" + cmd + "\" (start, status, load, kill, objects, stop, rm, path or svar)");
+        bad("unknown command \"" + cmd + "\" (start, status, load, kill, objects, stop, rm, path, svar or console)");
     // Positional words: svar's subcommand and its arguments; load's RTPU,
     // PROGRAM and ARGs (everything after PROGRAM goes to the program, also
     // words that look like options); kill's RTPU and TASK.
@@ -170,6 +178,11 @@ int main(int argc, char** argv) {
     const char* backplane = nullptr;
     for (int i = 2; i < argc; ++i) {
         const std::string a = argv[i];
+        if (cmd == "console" && a != "--backplane") {
+            words.push_back(argv[i]);  // console's own options (--rtpus, --script)
+            if ((a == "--rtpus" || a == "--script") && i + 1 < argc) words.push_back(argv[++i]);
+            continue;
+        }
         if (cmd == "load" && words.size() >= 2) {
             words.push_back(argv[i]);  // the program's own arguments
             continue;
@@ -308,6 +321,7 @@ int main(int argc, char** argv) {
     if (cmd == "load" && words.size() < 2) bad("load wants RTPU PROGRAM [ARG...]");
     if (cmd == "kill" && words.size() != 2) bad("kill wants RTPU TASK (a task id or name)");
     if (cmd == "status") return cmd_status(o);
+    if (cmd == "console") return cmd_console(o, words);
     if (cmd == "load") return cmd_load(o, words);
     if (cmd == "kill") return cmd_kill(o, words);
     if (cmd == "objects") return cmd_objects(o);

@@ -1,0 +1,159 @@
+// Suite `console`: `chimera console` on a pseudo-terminal against a system
+// that `chimera start` runs (host server in slot 0, RTPUs 1..3): stdin
+// handed between RTPUs, "Waiting for TTY Input", the closest match for a
+// mistyped command, a script file, a host program run on the console's
+// terminal, and 100,000 lines printed by 8 tasks on 3 RTPUs arriving whole,
+// each once.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <map>
+#include <regex>
+#include <set>
+#include <string>
+
+#include "../pty_driver.hpp"
+#include "../rtpu/rtpu_fixture.hpp"
+
+namespace chm::test {
+namespace {
+
+class ConsoleTest : public RtpuTest {
+protected:
+    void start_system(int rtpus) {
+        Outcome r = chimera({"start", "--rtpus", std::to_string(rtpus), "--host-root", dir_});
+        ASSERT_EQ(r.status, 0) << r.err << r.out;
+        ASSERT_EQ(chm_bp_attach_host(bp_.c_str(), "test", nullptr), 0) << chm_bp_last_error();
+    }
+    // `chimera console ARGS` on a new terminal.
+    void open_console(Pty& t, const std::vector<std::string>& extra = {}) {
+        std::vector<std::string> args = {CHIMERA_BIN, "console", "--backplane", bp_};
+        args.insert(args.end(), extra.begin(), extra.end());
+        ASSERT_TRUE(t.start([&] {
+            std::vector<char*> argv;
+            for (std::string& a : args) argv.push_back(a.data());
+            argv.push_back(nullptr);
+            execv(argv[0], argv.data());
+            return 127;
+        }));
+        ASSERT_TRUE(t.read_until("help lists the commands")) << t.seen;
+        ASSERT_TRUE(t.read_until("chimera> ")) << t.seen;
+    }
+};
+
+TEST_F(ConsoleTest, OneRtpuOwnsStdinAndTheOtherWaitsForTheTerminal) {
+    ASSERT_NO_FATAL_FAILURE(start_system(2));
+    Pty t;
+    ASSERT_NO_FATAL_FAILURE(open_console(t));
+    t.type(std::string("load 2 ") + READER_SO + " two\r");
+    ASSERT_TRUE(t.read_until("[2] two ready")) << t.seen;
+    // RTPU 1 has the terminal: RTPU 2's reader waits, and the console says so.
+    ASSERT_TRUE(t.read_until("[2] task ")) << t.seen;
+    ASSERT_TRUE(t.read_until(": Waiting for TTY Input")) << t.seen;
+    t.type(std::string("load 1 ") + READER_SO + " one\r");
+    ASSERT_TRUE(t.read_until("[1] one ready")) << t.seen;
+    ASSERT_TRUE(t.read_until("[1] input")) << t.seen;
+    t.type("hello\r");
+    ASSERT_TRUE(t.read_until("[1] one got: hello")) << t.seen;
+    // Hand the terminal over: the waiting reader on RTPU 2 gets the next line.
+    ASSERT_TRUE(t.read_until("[1] input")) << t.seen;
+    t.type(":fg 2\r");
+    ASSERT_TRUE(t.read_until("RTPU 2 has the terminal (a task is reading)")) << t.seen;
+    ASSERT_TRUE(t.read_until("[2] input")) << t.seen;
+    t.type("world\r");
+    ASSERT_TRUE(t.read_until("[2] two got: world")) << t.seen;
+    EXPECT_EQ(t.seen.find("one got: world"), std::string::npos) << t.seen;
+    EXPECT_EQ(t.seen.find("two got: hello"), std::string::npos) << t.seen;
+    ASSERT_TRUE(t.read_until("[2] input")) << t.seen;
+    t.type("bye\r");
+    ASSERT_TRUE(t.read_until("[2] two done")) << t.seen;
+    t.type("quit\r");
+    EXPECT_EQ(t.wait_exit(), 0) << t.seen;
+}
+
+TEST_F(ConsoleTest, MistypedCommandsAScriptAndTaskControl) {
+    ASSERT_NO_FATAL_FAILURE(start_system(1));
+    const std::string script = dir_ + "/setup.chimera";
+    std::ofstream(script) << "# a console script\nload 1 " << PRINTER_SO << " 1 3 scripted\nrtpus\n";
+    Pty t;
+    ASSERT_NO_FATAL_FAILURE(open_console(t, {"--script", script}));
+    ASSERT_TRUE(t.read_until("[1] scripted task 0 finished")) << t.seen;
+    t.type("taks 1\r");
+    ASSERT_TRUE(t.read_until("did you mean 'tasks'?")) << t.seen;
+    t.type(std::string("load 1 ") + READER_SO + " keeper\r");
+    ASSERT_TRUE(t.read_until("[1] keeper ready")) << t.seen;
+    ASSERT_TRUE(t.read_until("[1] input")) << t.seen;
+    t.type(":tasks 1\r");
+    ASSERT_TRUE(t.read_until("reader")) << t.seen;
+    t.type(":kill 1 reader.so\r");
+    ASSERT_TRUE(t.read_until("destroyed")) << t.seen;
+    t.type(":quit\r");
+    EXPECT_EQ(t.wait_exit(), 0) << t.seen;
+    chm_rtpu_info_t info;
+    EXPECT_EQ(chm_rtpu_ping(1, &info), 0) << "the console's end leaves the RTPUs running";
+}
+
+TEST_F(ConsoleTest, EightTasksOnThreeRtpusPrint100000WholeLines) {
+    ASSERT_NO_FATAL_FAILURE(start_system(3));
+    Pty t;
+    t.wait_ms = 120000;
+    ASSERT_NO_FATAL_FAILURE(open_console(t));
+    // 3 + 3 + 2 tasks, 12,500 lines each.
+    const int tasks[] = {3, 3, 2};
+    for (int r = 1; r <= 3; ++r)
+        t.type("load " + std::to_string(r) + " " + PRINTER_SO + " " + std::to_string(tasks[r - 1]) +
+               " 12500 r" + std::to_string(r) + "\r");
+    // Wait until every task said it finished (order between RTPUs is free).
+    const std::uint64_t end = now_ms() + 120000;
+    auto finished = [&] {
+        int n = 0;
+        for (std::size_t at = 0; (at = t.seen.find(" finished", at)) != std::string::npos; ++at) ++n;
+        return n;
+    };
+    while (finished() < 8 && now_ms() < end) t.pump(200);
+    ASSERT_EQ(finished(), 8) << t.seen.substr(t.seen.size() > 2000 ? t.seen.size() - 2000 : 0);
+    // Every line whole and exactly once; each task's lines in order.
+    // A line as the console shows it: maybe after the line editor's
+    // escape sequence, nothing of another line before or after it.
+    const std::regex line(R"(^\[(\d)\] r(\d) task (\d) line (\d+) of 12500 (-+)\r*$)");
+    std::map<std::pair<int, int>, int> next;
+    std::set<std::string> seen_lines;
+    int good = 0, torn = 0;
+    std::size_t at = 0;
+    while (at < t.seen.size()) {
+        std::size_t nl = t.seen.find('\n', at);
+        if (nl == std::string::npos) nl = t.seen.size();
+        const std::string l = t.seen.substr(at, nl - at);
+        at = nl + 1;
+        if (l.find(" line ") == std::string::npos) continue;
+        std::smatch m;
+        // What the terminal shows of it: "\r\x1b[J" (the line editor moving
+        // a half-typed line out of the way) clears what came before.
+        std::string body = l;
+        const std::size_t cleared = body.rfind("\r\x1b[J");
+        if (cleared != std::string::npos) body.erase(0, cleared + 4);
+        while (body.rfind("chimera> ", 0) == 0) body.erase(0, 9);  // a prompt redrawn before it
+        if (!std::regex_match(body, m, line)) {
+            if (torn < 5) ADD_FAILURE() << "torn: " << ::testing::PrintToString(body);
+            ++torn;
+            continue;
+        }
+        const int rtpu = std::stoi(m[1]), tag = std::stoi(m[2]), k = std::stoi(m[3]), i = std::stoi(m[4]);
+        const int dashes = int(m[5].length());
+        if (rtpu != tag || dashes != 10 + (i * 7 + k) % 40 || next[{rtpu, k}] != i) {
+            ++torn;
+            continue;
+        }
+        next[{rtpu, k}] = i + 1;
+        ++good;
+    }
+    EXPECT_EQ(torn, 0);
+    EXPECT_EQ(good, 100000);
+    for (int r = 1; r <= 3; ++r)
+        for (int k = 0; k < tasks[r - 1]; ++k) EXPECT_EQ((next[{r, k}]), 12500) << "RTPU " << r << " task " << k;
+    t.type("quit\r");
+    EXPECT_EQ(t.wait_exit(), 0);
+}
+
+}  // namespace
+}  // namespace chm::test
