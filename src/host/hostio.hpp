@@ -71,6 +71,8 @@ enum FrameType : std::uint32_t {
     kFrameOwn,        // console -> server: data = uint32 mask of slots wanted (0: every free one)
     kFrameOwned,      // server -> console: data = uint32 mask of slots it now owns
     kFrameInput,      // console -> server: input for RTPU `rtpu` (len 0: end of file)
+    kFrameTerminal,   // console -> server: its terminal (stdin, stdout, stderr) as SCM_RIGHTS
+    kFrameRun,        // server -> console: a host program runs on its terminal (tid 1) or ended (tid 0)
 };
 struct Frame {
     std::uint32_t type;

@@ -10,6 +10,8 @@
 #include <map>
 #include <regex>
 #include <set>
+
+#include <sys/stat.h>
 #include <string>
 
 #include "../pty_driver.hpp"
@@ -91,6 +93,28 @@ TEST_F(ConsoleTest, MistypedCommandsAScriptAndTaskControl) {
     EXPECT_EQ(t.wait_exit(), 0) << t.seen;
     chm_rtpu_info_t info;
     EXPECT_EQ(chm_rtpu_ping(1, &info), 0) << "the console's end leaves the RTPUs running";
+}
+
+TEST_F(ConsoleTest, AHostProgramATaskRunsUsesTheConsolesTerminal) {
+    ASSERT_NO_FATAL_FAILURE(start_system(1));
+    ASSERT_EQ(mkdir((dir_ + "/listing").c_str(), 0700), 0);
+    std::ofstream(dir_ + "/listing/marker-for-ls") << "x";
+    Pty t;
+    ASSERT_NO_FATAL_FAILURE(open_console(t));
+    const std::string out = dir_ + "/run.out";
+    t.type("load 1 " + std::string(XFS_PROBE_SO) + " " + out + " run ls -1 listing\r");
+    ASSERT_TRUE(t.read_until("marker-for-ls")) << t.seen;  // ls wrote on this terminal
+    ASSERT_TRUE(wait_text(out, "run ")) << t.seen;
+    EXPECT_NE(read_file(out).find("run r=0 status=0"), std::string::npos) << read_file(out);
+    t.type("load 1 " + std::string(XFS_PROBE_SO) + " " + out + " run ls no-such-entry\r");
+    ASSERT_TRUE(t.read_until("no-such-entry")) << t.seen;  // ls's complaint, on this terminal too
+    ASSERT_TRUE(wait_text(out, "status=2")) << read_file(out);
+    // The console has its terminal back.
+    t.type("rtpus\r");
+    ASSERT_TRUE(t.read_until("this console's")) << t.seen;
+    t.type("quit\r");
+    EXPECT_EQ(t.wait_exit(), 0) << t.seen;
+    EXPECT_EQ(read_file(bp_ + ".host.log").find("marker-for-ls"), std::string::npos) << "not in the server's log";
 }
 
 TEST_F(ConsoleTest, EightTasksOnThreeRtpusPrint100000WholeLines) {

@@ -84,9 +84,9 @@ TEST_F(HostTest, ReadWriteSeekStatFromAHostThread) {
     EXPECT_EQ(chm_xfs_lseek(fd, 0, SEEK_END), std::int64_t(big.size()));
     std::string back(big.size(), 0);
     EXPECT_EQ(chm_xfs_pread(fd, back.data(), back.size(), 0), std::int64_t(big.size()));
-    EXPECT_EQ(back, big);
+    EXPECT_TRUE(back == big) << "the bytes read back differ";
     EXPECT_EQ(chm_xfs_close(fd), 0);
-    EXPECT_EQ(read_file(root_ + "/sub/big.bin"), big);
+    EXPECT_TRUE(read_file(root_ + "/sub/big.bin") == big) << "the host file differs";
     ASSERT_EQ(chm_xfs_stat("sub/big.bin", &st), 0);
     EXPECT_EQ(st.size, big.size());
     ASSERT_EQ(chm_xfs_stat("inside", &st), 0) << "a link inside the root is followed";
@@ -96,6 +96,32 @@ TEST_F(HostTest, ReadWriteSeekStatFromAHostThread) {
     EXPECT_NE(std::string(chm_xfs_last_error()).find("missing.txt"), std::string::npos) << chm_xfs_last_error();
     EXPECT_EQ(chm_xfs_open("hello.txt", 0x1000, 0), -EINVAL);
     EXPECT_EQ(chm_xfs_read(12345, buf, 1), -EBADF);
+}
+
+// Regression: the transfer segment was remembered across attachments, so a
+// process that left one backplane and attached another read through the
+// old mapping (the server found no segment there: -EINVAL).
+TEST_F(HostTest, ALaterAttachmentMakesItsOwnTransferSegment) {
+    std::string big(150'000, 0);
+    for (std::size_t i = 0; i < big.size(); ++i) big[i] = char(i * 31 + 1);
+    write(root_ + "/big.bin", big);
+    auto read_big = [&] {
+        const int fd = chm_xfs_open("big.bin", CHM_XFS_RDONLY, 0);
+        EXPECT_GE(fd, 0) << chm_xfs_last_error();
+        std::string back(big.size(), 0);
+        EXPECT_EQ(chm_xfs_read(fd, back.data(), back.size()), std::int64_t(big.size())) << chm_xfs_last_error();
+        EXPECT_TRUE(back == big) << "the bytes read differ";
+        chm_xfs_close(fd);
+    };
+    read_big();
+    ASSERT_EQ(chm_bp_leave(), 0);
+    kill(server_, SIGKILL);
+    // A second system, on another backplane file.
+    bp_ = dir_ + "/second.bp";
+    create();
+    server_ = start_rtpu(0, {"--host-server", root_});
+    ASSERT_TRUE(wait_serving(0, server_)) << read_file(err_of(0));
+    read_big();
 }
 
 TEST_F(HostTest, EveryEscapeIsRefused) {

@@ -8,6 +8,9 @@
 // when one of its tasks reads stdin, the next line typed goes to that task;
 // a task on another RTPU that reads stdin waits, and the console says
 // "Waiting for TTY Input" until the user gives its RTPU the terminal.
+// The terminal itself is lent to the host server (SCM_RIGHTS): a host
+// program a task runs (chm_host_run) runs on it, the console keeping off
+// stdin until it ends.
 #include <cerrno>
 #include <climits>
 #include <csignal>
@@ -46,6 +49,7 @@ struct Console {
     bool feeding = false;                 // the next line typed goes to RTPU fg
     std::string typed;                    // a task's input line, so far
     bool over = false;
+    bool lent = false;                    // a host program runs on this terminal
 };
 Console g;
 
@@ -141,6 +145,16 @@ bool on_server() {
         else
             show("[" + std::to_string(f.rtpu) + "] task " + std::to_string(f.tid) +
                  ": Waiting for TTY Input (fg " + std::to_string(f.rtpu) + " gives it the terminal)");
+    } else if (f.type == chm::host::kFrameRun) {
+        // A task's chm_host_run: the program has the terminal until it ends.
+        g.lent = f.tid != 0;
+        if (g.lent && g.interactive) {
+            chm_cmdi_interactive_end(g.cmdi);
+            g.interactive = false;
+        } else if (!g.lent && !g.feeding) {
+            begin_commands();
+            maybe_feed();
+        }
     } else if (f.type == chm::host::kFrameOwned && f.len >= 4) {
         std::memcpy(&g.owned, data.data(), 4);
     }
@@ -179,6 +193,26 @@ void on_feed_input() {
     }
     send_frame(chm::host::kFrameInput, std::uint32_t(g.fg), g.typed.data(), std::uint32_t(nl + 1));
     end_feed();
+}
+
+// Lend the host server this terminal for the programs tasks run
+// (chm_host_run): stdin, stdout and stderr as SCM_RIGHTS.
+bool send_terminal() {
+    Frame f{chm::host::kFrameTerminal, 0, 0, 0};
+    iovec io{&f, sizeof f};
+    alignas(cmsghdr) char ctl[CMSG_SPACE(3 * sizeof(int))] = {};
+    msghdr m{};
+    m.msg_iov = &io;
+    m.msg_iovlen = 1;
+    m.msg_control = ctl;
+    m.msg_controllen = sizeof ctl;
+    cmsghdr* h = CMSG_FIRSTHDR(&m);
+    h->cmsg_level = SOL_SOCKET;
+    h->cmsg_type = SCM_RIGHTS;
+    h->cmsg_len = CMSG_LEN(3 * sizeof(int));
+    const int fds[3] = {0, 1, 2};
+    std::memcpy(CMSG_DATA(h), fds, sizeof fds);
+    return ::sendmsg(g.sock, &m, MSG_NOSIGNAL) == ssize_t(sizeof f);
 }
 
 // ------------------------------------------------------------ commands
@@ -332,6 +366,10 @@ int cmd_console(const Options& o, const std::vector<const char*>& args) {
         say("the host server closed the console socket");
         return 1;
     }
+    if (isatty(0) && !send_terminal()) {
+        say("the host server closed the console socket");
+        return 1;
+    }
     // The answer says which RTPUs this console got.
     for (g.owned = UINT32_MAX; g.owned == UINT32_MAX;)
         if (!on_server()) {
@@ -358,7 +396,8 @@ int cmd_console(const Options& o, const std::vector<const char*>& args) {
     std::fflush(stdout);
     begin_commands();
     while (!g.over) {
-        pollfd fds[2] = {{0, POLLIN, 0}, {g.sock, POLLIN, 0}};
+        // While a host program has the terminal, its input is the program's.
+        pollfd fds[2] = {{g.lent ? -1 : 0, POLLIN, 0}, {g.sock, POLLIN, 0}};
         if (::poll(fds, 2, -1) < 0) {
             if (errno == EINTR) continue;
             break;

@@ -35,8 +35,14 @@ namespace {
 
 struct Console {
     int fd = -1;
-    std::uint32_t owned = 0;  // slot mask
+    std::uint32_t owned = 0;     // slot mask
+    int term[3] = {-1, -1, -1};  // its terminal, when it sent it
 };
+
+void close_terminal(Console& k) {
+    for (int& t : k.term)
+        if (t >= 0) ::close(t), t = -1;
+}
 
 struct ConsoleState {
     std::string path;
@@ -74,6 +80,7 @@ bool send_frame(Console& k, const Frame& f, const void* data) {
 
 void drop(std::size_t i) {  // under c->mu
     ::close(c->consoles[i].fd);
+    close_terminal(c->consoles[i]);
     c->consoles.erase(c->consoles.begin() + std::ptrdiff_t(i));
     c->cv.notify_all();
 }
@@ -96,11 +103,51 @@ bool read_all(int fd, void* buf, std::size_t n) {
     return true;
 }
 
+// A frame header, with the descriptors a kFrameTerminal carries.
+bool read_header(int fd, Frame* f, int fds[3], int* nfds) {
+    iovec io{f, sizeof *f};
+    alignas(cmsghdr) char ctl[CMSG_SPACE(3 * sizeof(int))];
+    msghdr m{};
+    m.msg_iov = &io;
+    m.msg_iovlen = 1;
+    m.msg_control = ctl;
+    m.msg_controllen = sizeof ctl;
+    ssize_t r;
+    do r = ::recvmsg(fd, &m, MSG_CMSG_CLOEXEC);
+    while (r < 0 && errno == EINTR);
+    if (r <= 0) return false;
+    *nfds = 0;
+    for (cmsghdr* h = CMSG_FIRSTHDR(&m); h; h = CMSG_NXTHDR(&m, h))
+        if (h->cmsg_level == SOL_SOCKET && h->cmsg_type == SCM_RIGHTS) {
+            const int n = int((h->cmsg_len - CMSG_LEN(0)) / sizeof(int));
+            for (int j = 0; j < n; ++j) {
+                int d;
+                std::memcpy(&d, CMSG_DATA(h) + j * sizeof(int), sizeof d);
+                if (*nfds < 3) fds[(*nfds)++] = d;
+                else ::close(d);
+            }
+        }
+    return std::size_t(r) == sizeof *f || read_all(fd, reinterpret_cast<char*>(f) + r, sizeof *f - std::size_t(r));
+}
+
 // One frame from console i (its socket is readable). False: drop it.
 bool on_frame(std::size_t i) {
     Frame f;
     const int fd = c->consoles[i].fd;
-    if (!read_all(fd, &f, sizeof f) || f.len > kFrameMax) return false;
+    int fds[3], nfds = 0;
+    const bool whole = read_header(fd, &f, fds, &nfds);
+    if (nfds && (!whole || f.type != kFrameTerminal || nfds != 3)) {
+        for (int j = 0; j < nfds; ++j) ::close(fds[j]);
+        nfds = 0;
+    }
+    if (!whole || f.len > kFrameMax) return false;
+    if (f.type == kFrameTerminal) {
+        if (nfds != 3) return false;
+        std::lock_guard<std::mutex> l(c->mu);
+        close_terminal(c->consoles[i]);
+        for (int j = 0; j < 3; ++j) c->consoles[i].term[j] = fds[j];
+        return true;
+    }
     std::vector<char> data(f.len);
     if (f.len && !read_all(fd, data.data(), f.len)) return false;
     std::lock_guard<std::mutex> l(c->mu);
@@ -208,7 +255,7 @@ void console_stop() {
     {
         std::lock_guard<std::mutex> l(c->mu);
         c->stopping = true;
-        for (Console& k : c->consoles) ::close(k.fd);
+        for (Console& k : c->consoles) ::close(k.fd), close_terminal(k);
         c->consoles.clear();
     }
     c->cv.notify_all();
@@ -239,6 +286,29 @@ int console_out(std::uint32_t slot, const char* text, std::uint32_t len) {
     }
     // No console owns it: the sender keeps the lines in its own log.
     return -ENOTCONN;
+}
+
+int console_terminal(std::uint32_t slot, int fds[3]) {
+    if (!c || slot >= CHM_BP_MAX_SLOTS) return -ENOTCONN;
+    std::lock_guard<std::mutex> l(c->mu);
+    Console* k = owner_of(slot);
+    if (!k || k->term[0] < 0) return -ENOTCONN;
+    for (int j = 0; j < 3; ++j) fds[j] = ::fcntl(k->term[j], F_DUPFD_CLOEXEC, 3);
+    if (fds[0] < 0 || fds[1] < 0 || fds[2] < 0) {
+        for (int j = 0; j < 3; ++j)
+            if (fds[j] >= 0) ::close(fds[j]);
+        return -EMFILE;
+    }
+    // The console lets go of the terminal while the program has it.
+    if (!send_frame(*k, Frame{kFrameRun, slot, 1, 0}, nullptr)) drop(std::size_t(k - c->consoles.data()));
+    return 0;
+}
+
+void console_terminal_back(std::uint32_t slot) {
+    if (!c || slot >= CHM_BP_MAX_SLOTS) return;
+    std::lock_guard<std::mutex> l(c->mu);
+    if (Console* k = owner_of(slot))
+        if (!send_frame(*k, Frame{kFrameRun, slot, 0, 0}, nullptr)) drop(std::size_t(k - c->consoles.data()));
 }
 
 int console_in(std::uint32_t slot, std::int32_t tid, std::uint32_t owner, char* out, std::uint32_t max) {

@@ -1,7 +1,8 @@
 // chm_host_run on the host: an argument vector run with posix_spawnp in
-// the client's working directory, on the host server's own terminal (its
-// stdin, stdout and stderr), never through a shell unless the server was
-// started allowing one; the worker waits for it to exit.
+// the client's working directory, on the terminal of the console that owns
+// the caller's RTPU (else the host server's own stdin, stdout and stderr),
+// never through a shell unless the server was started allowing one; the
+// worker waits for it to exit.
 #include <cerrno>
 #include <csignal>
 #include <cstring>
@@ -35,8 +36,8 @@ bool is_shell(const char* prog) {
 
 }  // namespace
 
-int run_program(const Client& c, const char* text, std::uint32_t len, std::uint64_t argc, bool allow_shell,
-                std::string* why) {
+int run_program(const Client& c, std::uint32_t slot, const char* text, std::uint32_t len, std::uint64_t argc,
+                bool allow_shell, std::string* why) {
     if (argc < 1 || argc > 256 || len == 0 || text[len - 1] != 0) {
         *why = "malformed argument vector";
         return -EINVAL;
@@ -60,6 +61,10 @@ int run_program(const Client& c, const char* text, std::uint32_t len, std::uint6
     posix_spawn_file_actions_init(&fa);
     posix_spawnattr_init(&at);
     posix_spawn_file_actions_addchdir_np(&fa, dir.c_str());
+    int term[3];
+    const bool on_console = console_terminal(slot, term) == 0;
+    if (on_console)
+        for (int j = 0; j < 3; ++j) posix_spawn_file_actions_adddup2(&fa, term[j], j);
     // The kernel thread's signal handlers and the workers' full mask must
     // not pass to the program.
     sigset_t none, all;
@@ -72,6 +77,15 @@ int run_program(const Client& c, const char* text, std::uint32_t len, std::uint6
     const int e = posix_spawnp(&pid, argv[0], &fa, &at, argv.data(), environ);
     posix_spawn_file_actions_destroy(&fa);
     posix_spawnattr_destroy(&at);
+    if (on_console)
+        for (int t : term) ::close(t);
+    struct Back {  // the console gets its terminal back on every path
+        bool on;
+        std::uint32_t slot;
+        ~Back() {
+            if (on) console_terminal_back(slot);
+        }
+    } back{on_console, slot};
     if (e != 0) {
         *why = std::string("cannot run ") + argv[0] + ": " + std::strerror(e);
         return -e;

@@ -27,8 +27,8 @@
 
 namespace chm::host::server {
 
-int run_program(const Client& c, const char* text, std::uint32_t len, std::uint64_t argc, bool allow_shell,
-                std::string* why);  // run.cpp
+int run_program(const Client& c, std::uint32_t slot, const char* text, std::uint32_t len, std::uint64_t argc,
+                bool allow_shell, std::string* why);  // run.cpp
 void run_stop_all();                      // run.cpp
 
 namespace {
@@ -263,7 +263,8 @@ int serve(const HostRequest& h, const char* body, std::uint32_t body_len, std::u
         }
         thread_local std::string msg;
         msg.clear();
-        const int r = run_program(c, body, std::min(body_len, h.text_len), h.a, g->opt.allow_shell, &msg);
+        const int r = run_program(c, bp::token_slot(owner), body, std::min(body_len, h.text_len), h.a,
+                                  g->opt.allow_shell, &msg);
         if (r < 0 && !msg.empty()) why = msg.c_str();
         return r;
     }

@@ -58,5 +58,10 @@ int console_start(const char* socket_path);
 void console_stop();
 int console_out(std::uint32_t slot, const char* text, std::uint32_t len);
 int console_in(std::uint32_t slot, std::int32_t tid, std::uint32_t owner, char* out, std::uint32_t max);
+// The terminal of the console that owns `slot` (dups into fds; the console
+// is told to let go of it): 0, or -ENOTCONN no console, or none sent its
+// terminal. console_terminal_back tells it the program ended.
+int console_terminal(std::uint32_t slot, int fds[3]);
+void console_terminal_back(std::uint32_t slot);
 
 }  // namespace chm::host::server
