@@ -117,6 +117,34 @@ TEST_F(ConsoleTest, AHostProgramATaskRunsUsesTheConsolesTerminal) {
     EXPECT_EQ(read_file(bp_ + ".host.log").find("marker-for-ls"), std::string::npos) << "not in the server's log";
 }
 
+TEST_F(ConsoleTest, TwoConsolesEachOwnTheirRtpusAndALostOneBlocksNobody) {
+    ASSERT_NO_FATAL_FAILURE(start_system(2));
+    Pty a, b;
+    ASSERT_NO_FATAL_FAILURE(open_console(a, {"--rtpus", "1"}));
+    ASSERT_NO_FATAL_FAILURE(open_console(b, {"--rtpus", "2"}));
+    EXPECT_NE(a.seen.find("RTPUs 1 (terminal: 1)"), std::string::npos) << a.seen;
+    EXPECT_NE(b.seen.find("RTPUs 2 (terminal: 2)"), std::string::npos) << b.seen;
+    a.type("load 2 " + std::string(PRINTER_SO) + " 1 2 second\r");  // loaded from a, printed on b
+    ASSERT_TRUE(b.read_until("[2] second task 0 finished")) << b.seen;
+    b.type("load 1 " + std::string(PRINTER_SO) + " 1 2 first\r");
+    ASSERT_TRUE(a.read_until("[1] first task 0 finished")) << a.seen;
+    a.pump(300);
+    EXPECT_EQ(a.seen.find("second task"), std::string::npos) << a.seen;
+    EXPECT_EQ(b.seen.find("[1] first task"), std::string::npos) << b.seen;
+    // Console b is gone without a word: RTPU 2's lines go to its log, and
+    // its tasks never wait on the dead console.
+    kill(b.pid, SIGKILL);
+    waitpid(b.pid, nullptr, 0);
+    b.pid = -1;
+    a.type("load 2 " + std::string(PRINTER_SO) + " 2 500 orphan\r");
+    ASSERT_TRUE(wait_text(bp_ + ".rtpu2.log", "orphan task 1 finished", 20000)) << read_file(bp_ + ".rtpu2.log");
+    const std::string log = read_file(bp_ + ".rtpu2.log");
+    EXPECT_NE(log.find("orphan task 0 line 499 of 500"), std::string::npos);
+    EXPECT_NE(log.find("orphan task 0 finished"), std::string::npos);
+    a.type("quit\r");
+    EXPECT_EQ(a.wait_exit(), 0) << a.seen;
+}
+
 TEST_F(ConsoleTest, EightTasksOnThreeRtpusPrint100000WholeLines) {
     ASSERT_NO_FATAL_FAILURE(start_system(3));
     Pty t;

@@ -7,6 +7,7 @@
 #include <fstream>
 #include <string>
 
+#include <sys/ioctl.h>
 #include <sys/stat.h>
 
 #include "chimera/host.h"
@@ -122,6 +123,23 @@ TEST_F(HostTest, ALaterAttachmentMakesItsOwnTransferSegment) {
     server_ = start_rtpu(0, {"--host-server", root_});
     ASSERT_TRUE(wait_serving(0, server_)) << read_file(err_of(0));
     read_big();
+}
+
+TEST_F(HostTest, IoctlPassesItsArgumentBothWays) {
+    const int fd = chm_xfs_open("hello.txt", CHM_XFS_RDONLY, 0);
+    ASSERT_GE(fd, 0) << chm_xfs_last_error();
+    int avail = -1;
+    ASSERT_EQ(chm_xfs_ioctl(fd, FIONREAD, &avail, sizeof avail), 0) << chm_xfs_last_error();
+    EXPECT_EQ(avail, 12);  // what is left to read of the file
+    char four[4];
+    ASSERT_EQ(chm_xfs_read(fd, four, 4), 4);
+    ASSERT_EQ(chm_xfs_ioctl(fd, FIONREAD, &avail, sizeof avail), 0);
+    EXPECT_EQ(avail, 8);
+    EXPECT_EQ(chm_xfs_ioctl(fd, TIOCGWINSZ, four, sizeof four), -ENOTTY);  // not a terminal
+    char big[300];
+    EXPECT_EQ(chm_xfs_ioctl(fd, FIONREAD, big, sizeof big), -EINVAL);
+    EXPECT_EQ(chm_xfs_ioctl(fd + 1000, FIONREAD, &avail, sizeof avail), -EBADF);
+    chm_xfs_close(fd);
 }
 
 TEST_F(HostTest, EveryEscapeIsRefused) {
