@@ -16,7 +16,7 @@ PKGS_BENCH = libbenchmark-dev rt-tests python3-matplotlib
 # clang's -fsanitize=fuzzer links libclang_rt.fuzzer, which Debian 12
 # ships in libclang-rt-14-dev (libfuzzer-14-dev is the standalone copy).
 PKGS_FUZZ  = clang libclang-rt-14-dev
-FUZZ_TARGETS = fuzz_backplane fuzz_msgq fuzz_xmail fuzz_args fuzz_config fuzz_servo fuzz_cmdi
+FUZZ_TARGETS = fuzz_backplane fuzz_msgq fuzz_xmail fuzz_args fuzz_config fuzz_servo fuzz_cmdi fuzz_host
 
 .PHONY: all deps deps-cross deps-bench deps-fuzz build demo demo-loop demo-multi stress test test-native test-m68k \
         test-aarch64 test-fuzz fuzz fuzz-seeds bench clean

@@ -28,6 +28,14 @@ int start(const Options& o);
 // every handle. Kernel thread, after chm_kernel_run returned.
 void stop();
 
+// The request path without a backplane, for the fuzz harness: the state
+// start() makes (the root, handles, clients) with `room` bytes of reply,
+// no workers and no express mail. serve_local decodes one request of
+// `len` bytes as the server task and workers do and returns its status,
+// the reply's length in *n (at most room).
+int start_local(const Options& o, std::uint32_t room);
+int serve_local(const char* req, std::uint32_t len, std::uint32_t owner, char* rep, std::uint32_t* n);
+
 // ------------------------------------------------------------ internals
 
 // One client process, by backplane slot.
