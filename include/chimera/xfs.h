@@ -7,7 +7,7 @@
  * a large host file beside a 1 kHz loop (a direct read() of a regular file
  * blocks the whole RTPU: the kernel cannot poll a disk). Data beyond what
  * one express-mail record carries moves through a transfer segment in
- * common memory ("chimera.hostio.<slot>", 2 x 64 KiB, made on first use);
+ * common memory ("chimera.hostio.<slot>", 4 x 64 KiB, made on first use);
  * each request moves at most 64 KiB, larger reads and writes are split.
  *
  * Paths are relative to the calling RTPU's working directory on the host

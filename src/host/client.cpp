@@ -148,6 +148,32 @@ int request(HostRequest h, const void* text, std::uint32_t text_len, void* reply
     return r;
 }
 
+int post_request(HostRequest h, xmail::Pending* p, const char* what) {
+    t_error[0] = 0;
+    if (!bp::current()) return set_error("%s: not attached to a backplane", what), -ENOTCONN;
+    h.text_len = 0;
+    const int r = xmail::post(kServerSlot, xmail::kHost, &h, sizeof h, chm_host_timeout(), p);
+    if (r < 0) set_error("%s: host server: %s", what, chm_rtpu_last_error());
+    return r;
+}
+
+int await_request(xmail::Pending* p, void* reply, std::uint32_t cap, std::uint32_t* reply_len, const char* what) {
+    char why[256];
+    std::uint32_t n = 0;
+    const int r = xmail::await(p, why, sizeof why - 1, &n);
+    if (r >= 0) {
+        if (reply && n) std::memcpy(reply, why, n < cap ? n : cap);
+        if (reply_len) *reply_len = n;
+        return r;
+    }
+    const char* transport = chm_rtpu_last_error();
+    if (*transport)
+        set_error("%s: host server: %s", what, transport);
+    else
+        set_error("%s: %s", what, n > 1 && n < sizeof why && why[n - 1] == 0 ? why : std::strerror(-r));
+    return r;
+}
+
 }  // namespace chm::host
 
 extern "C" {

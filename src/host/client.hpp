@@ -6,6 +6,7 @@
 #include <cstdint>
 
 #include "host/hostio.hpp"
+#include "ipc/xmail/xmail.hpp"
 
 namespace chm::host {
 
@@ -16,6 +17,12 @@ namespace chm::host {
 // server's own errors are described with `what`).
 int request(HostRequest h, const void* text, std::uint32_t text_len, void* reply, std::uint32_t cap,
             std::uint32_t* reply_len, const char* what, std::uint64_t timeout_ns = 0);
+
+// request() in two halves (xmail::post / await), for the read-ahead that
+// keeps several requests in flight. post_request: 0 or a transport error
+// (message set); await_request: as request().
+int post_request(HostRequest h, xmail::Pending* p, const char* what);
+int await_request(xmail::Pending* p, void* reply, std::uint32_t cap, std::uint32_t* reply_len, const char* what);
 
 // Bytes of text (or reply payload) one request can carry inline.
 std::uint32_t inline_room();

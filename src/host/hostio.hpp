@@ -18,7 +18,7 @@
 namespace chm::host {
 
 enum Op : std::uint32_t {
-    kOpen = 1,   // text: path; a = flags (CHM_XFS_*), b = mode -> status: handle
+    kOpen = 1,   // text: path; a = flags (CHM_XFS_*), b = mode -> status: handle, reply: uint32 kOpen*
     kClose,      // fd
     kRead,       // fd, b = bytes wanted, a = offset or -1 (current position), bulk
     kWrite,      // fd, text or bulk: the data, a = offset or -1
@@ -34,6 +34,9 @@ enum Op : std::uint32_t {
     kIn,         // fd = the reading task, b = bytes at most -> reply: console input
     kOpEnd
 };
+
+// What an open reply says of the file (a uint32 of these bits).
+inline constexpr std::uint32_t kOpenRegular = 1;  // a regular file: reads may be streamed ahead
 
 struct HostRequest {
     std::uint32_t op;
@@ -84,7 +87,7 @@ static_assert(sizeof(Frame) == 16);
 inline constexpr std::uint32_t kFrameMax = 64 * 1024;
 
 inline constexpr std::uint32_t kBulkSize = 64 * 1024;
-inline constexpr std::uint32_t kBulkBuffers = 2;
+inline constexpr std::uint32_t kBulkBuffers = 4;
 inline constexpr int kServerSlot = 0;
 
 // The transfer segment of the process in backplane slot `slot`.

@@ -8,6 +8,7 @@
 
 #include "chimera/xfs.h"
 #include "host/client.hpp"
+#include "host/stream.hpp"
 
 using namespace chm::host;
 
@@ -107,17 +108,27 @@ int chm_xfs_open(const char* path, int flags, unsigned mode) {
     clear_error();
     if (flags & ~kFlagsKnown || (flags & 3) == 3)
         return set_error("open %s: unknown flags 0x%x", path ? path : "(null)", unsigned(flags)), -EINVAL;
-    return path_request(kOpen, path, nullptr, 0, nullptr, std::uint64_t(flags), mode & 07777);
+    std::uint32_t what = 0, n = 0;
+    const int fd = path_request(kOpen, path, &what, sizeof what, &n, std::uint64_t(flags), mode & 07777);
+    if (fd >= 0) stream::opened(fd, n == sizeof what && (what & kOpenRegular));
+    return fd;
 }
 
 int chm_xfs_close(int fd) {
     clear_error();
     char what[48];
     std::snprintf(what, sizeof what, "close of handle %d", fd);
+    stream::closed(fd);
     return request(make(kClose, fd), nullptr, 0, nullptr, 0, nullptr, what);
 }
 
 int64_t chm_xfs_read(int fd, void* buf, size_t n) {
+    clear_error();
+    if (n && !buf) return set_error("handle %d: NULL buffer", fd), -EFAULT;
+    bool streamed = false;
+    const std::int64_t r = stream::read(fd, static_cast<char*>(buf), n, &streamed);
+    if (streamed) return r;
+    if (int e = stream::end(fd)) return e;
     return transfer(fd, static_cast<char*>(buf), n, -1, read_part);
 }
 
@@ -127,11 +138,13 @@ int64_t chm_xfs_pread(int fd, void* buf, size_t n, int64_t offset) {
 }
 
 int64_t chm_xfs_write(int fd, const void* buf, size_t n) {
+    if (int e = stream::end(fd)) return e;
     return transfer(fd, static_cast<const char*>(buf), n, -1, write_part);
 }
 
 int64_t chm_xfs_pwrite(int fd, const void* buf, size_t n, int64_t offset) {
     if (offset < 0) return set_error("pwrite of handle %d: negative offset", fd), -EINVAL;
+    if (int e = stream::end(fd)) return e;  // what it read ahead may be overwritten
     return transfer(fd, static_cast<const char*>(buf), n, offset, write_part);
 }
 
@@ -139,6 +152,7 @@ int64_t chm_xfs_lseek(int fd, int64_t offset, int whence) {
     clear_error();
     if (whence != SEEK_SET && whence != SEEK_CUR && whence != SEEK_END)
         return set_error("lseek of handle %d: whence %d", fd, whence), -EINVAL;
+    if (int e = stream::end(fd)) return e;
     char what[48];
     std::snprintf(what, sizeof what, "lseek of handle %d", fd);
     std::uint64_t pos = 0;
@@ -180,6 +194,7 @@ int chm_xfs_ioctl(int fd, unsigned long request_code, void* arg, size_t arg_size
     clear_error();
     if (arg_size > 256 || (arg_size && !arg))
         return set_error("ioctl of handle %d: argument of %zu bytes (at most 256, not NULL)", fd, arg_size), -EINVAL;
+    if (int e = stream::end(fd)) return e;
     char what[64];
     std::snprintf(what, sizeof what, "ioctl 0x%lx of handle %d", request_code, fd);
     std::uint32_t n = 0;

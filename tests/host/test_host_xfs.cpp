@@ -19,6 +19,8 @@ namespace {
 
 class HostTest : public RtpuTest {
 protected:
+    // Room for the transfer segments (4 x 64 KiB per client process).
+    static constexpr std::uint32_t kCommon = 2 * 1024 * 1024;
     void SetUp() override {
         RtpuTest::SetUp();
         root_ = dir_ + "/root";
@@ -29,7 +31,7 @@ protected:
         ASSERT_EQ(symlink("../secret.txt", (root_ + "/escape").c_str()), 0);
         ASSERT_EQ(symlink("/etc/passwd", (root_ + "/abs").c_str()), 0);
         ASSERT_EQ(symlink("hello.txt", (root_ + "/inside").c_str()), 0);
-        create();
+        create(true, 32, 1024, kCommon);
         server_ = start_rtpu(0, {"--host-server", root_});
         ASSERT_TRUE(wait_serving(0, server_)) << read_file(err_of(0));
         chm_host_timeout_set(10'000'000'000ull);
@@ -119,10 +121,73 @@ TEST_F(HostTest, ALaterAttachmentMakesItsOwnTransferSegment) {
     kill(server_, SIGKILL);
     // A second system, on another backplane file.
     bp_ = dir_ + "/second.bp";
-    create();
+    create(true, 32, 1024, kCommon);
     server_ = start_rtpu(0, {"--host-server", root_});
     ASSERT_TRUE(wait_serving(0, server_)) << read_file(err_of(0));
     read_big();
+}
+
+// Differential: random reads (small, and large enough to stream ahead),
+// lseeks, preads, writes and fstats on one handle, beside the same calls on
+// a local descriptor of the same file; every result, byte and position
+// must agree (the read-ahead keeps the position and data the server would
+// have).
+TEST_F(HostTest, RandomCallsAgreeWithTheLocalFile) {
+    std::string data(3 * 1024 * 1024 + 12345, 0);
+    std::uint32_t x = 12345;
+    auto rnd = [&] { return x = x * 1103515245u + 12345u, (x >> 8); };
+    for (char& c : data) c = char(rnd());
+    write(root_ + "/diff.bin", data);
+    const int h = chm_xfs_open("diff.bin", CHM_XFS_RDWR, 0);
+    ASSERT_GE(h, 0) << chm_xfs_last_error();
+    const int l = ::open((root_ + "/diff.bin").c_str(), O_RDWR);
+    ASSERT_GE(l, 0);
+    std::vector<char> a(300 * 1024), b(300 * 1024);
+    for (int step = 0; step < 4000; ++step) {
+        const std::uint32_t op = rnd() % 10;
+        const std::size_t size = std::size_t(data.size());
+        SCOPED_TRACE("step " + std::to_string(step) + " op " + std::to_string(op));
+        if (op < 5) {  // read: mostly large (streamed), some small
+            const std::size_t n = op < 3 ? 16384 + rnd() % (280 * 1024) : rnd() % 5000;
+            const std::int64_t ra = chm_xfs_read(h, a.data(), n);
+            const ssize_t rb = ::read(l, b.data(), n);
+            ASSERT_EQ(ra, std::int64_t(rb)) << chm_xfs_last_error();
+            ASSERT_TRUE(std::memcmp(a.data(), b.data(), std::size_t(rb)) == 0);
+        } else if (op == 5) {
+            const std::int64_t off = std::int64_t(rnd() % (size + 1000));
+            const int whence = int(rnd() % 3);
+            const std::int64_t o = whence == SEEK_SET ? off : whence == SEEK_CUR ? off % 100000 - 50000 : -(off % 70000);
+            const std::int64_t ra = chm_xfs_lseek(h, o, whence);
+            const off_t rb = ::lseek(l, off_t(o), whence);
+            ASSERT_EQ(ra, rb < 0 ? -EINVAL : std::int64_t(rb));
+        } else if (op == 6) {
+            const std::int64_t off = std::int64_t(rnd() % size);
+            const std::size_t n = rnd() % 100000;
+            const std::int64_t ra = chm_xfs_pread(h, a.data(), n, off);
+            const ssize_t rb = ::pread(l, b.data(), n, off_t(off));
+            ASSERT_EQ(ra, std::int64_t(rb));
+            ASSERT_TRUE(std::memcmp(a.data(), b.data(), std::size_t(rb)) == 0);
+        } else if (op == 7) {  // a write at the position (ends a stream): both files get it
+            const std::size_t n = 1 + rnd() % 3000;
+            for (std::size_t i = 0; i < n; ++i) a[i] = char(rnd());
+            const std::int64_t at = ::lseek(l, 0, SEEK_CUR);
+            ASSERT_EQ(chm_xfs_write(h, a.data(), n), std::int64_t(n)) << chm_xfs_last_error();
+            // The local descriptor sees the server's write (one file): move
+            // it on as the write moved the handle.
+            ASSERT_EQ(::lseek(l, at + off_t(n), SEEK_SET), at + off_t(n));
+            if (std::size_t(at) + n > data.size()) data.resize(std::size_t(at) + n);
+        } else if (op == 8) {
+            chm_xfs_stat_t st;
+            ASSERT_EQ(chm_xfs_fstat(h, &st), 0);
+            struct stat ls;
+            ASSERT_EQ(::fstat(l, &ls), 0);
+            ASSERT_EQ(st.size, std::uint64_t(ls.st_size));
+        } else {  // where each says it is
+            ASSERT_EQ(chm_xfs_lseek(h, 0, SEEK_CUR), std::int64_t(::lseek(l, 0, SEEK_CUR)));
+        }
+    }
+    EXPECT_EQ(chm_xfs_close(h), 0);
+    ::close(l);
 }
 
 TEST_F(HostTest, IoctlPassesItsArgumentBothWays) {

@@ -86,14 +86,15 @@ protected:
     }
 
     // A backplane like chimera start makes (1 KiB records), and attach.
-    void create(bool attach = true, std::uint32_t records = 32, std::uint32_t record_size = 1024) {
+    void create(bool attach = true, std::uint32_t records = 32, std::uint32_t record_size = 1024,
+                std::uint32_t common_size = 256 * 1024) {
         chm_bp_config_t c;
         chm_bp_config_init(&c);
         c.rtpu_slots = 8;
         c.ring_records = records;
         c.ring_record_size = record_size;
         c.local_window_size = 64 * 1024;
-        c.common_size = 256 * 1024;
+        c.common_size = common_size;
         c.registry_capacity = 32;
         ASSERT_EQ(chm_bp_create(bp_.c_str(), &c), 0) << chm_bp_last_error();
         if (attach) {

@@ -164,6 +164,9 @@ int serve(const HostRequest& h, const char* body, std::uint32_t body_len, std::u
         }
         struct stat st;
         *free_slot = Handle{fd, owner, ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode)};
+        const std::uint32_t what = free_slot->regular ? kOpenRegular : 0;
+        std::memcpy(rep, &what, sizeof what);
+        *n = sizeof what;
         return int(free_slot - g->handles);
     }
     case kClose: {

@@ -146,10 +146,9 @@ unsigned withdraw(const bp::View& v, std::uint32_t token) {
     return n;
 }
 
-int call(int rtpu, Kind kind, const void* req, std::uint32_t len, void* reply, std::uint32_t cap,
-         std::uint32_t* reply_len, std::uint64_t timeout_ns) {
+int post(int rtpu, Kind kind, const void* req, std::uint32_t len, std::uint64_t timeout_ns, Pending* p) {
     t_error[0] = 0;
-    if (reply_len) *reply_len = 0;
+    p->r = nullptr;
     bp::Attachment* a = bp::current();
     if (!a) return set_error("not attached to a backplane"), -ENOTCONN;
     if (rtpu < 0 || std::uint32_t(rtpu) >= a->slots())
@@ -221,9 +220,28 @@ int call(int rtpu, Kind kind, const void* req, std::uint32_t len, void* reply, s
     if (ipc::wake_ring(std::uint32_t(rtpu), ipc::kVecExpressMail) == -EPERM) {
         // The slot's pid or thread id is not its member's (reported, last
         // error set): nobody we may wake would serve it.
-        if (abandon(r, seq)) return take_reply(r, seq, reply, cap, reply_len);
+        if (abandon(r, seq)) {
+            std::uint32_t replied = make_state(seq, kReplied);  // nobody will read it
+            r->state.compare_exchange_strong(replied, make_state(seq, kFree), Rel, R);
+        }
         return -EPERM;
     }
+    *p = Pending{r, seq, std::uint32_t(rtpu), st, deadline, timeout_ns};
+    return 0;
+}
+
+int await(Pending* p, void* reply, std::uint32_t cap, std::uint32_t* reply_len) {
+    t_error[0] = 0;
+    if (reply_len) *reply_len = 0;
+    Record* r = p->r;
+    if (!r) return set_error("no request posted"), -EINVAL;
+    p->r = nullptr;
+    const std::uint32_t seq = p->seq, st = p->status;
+    const int rtpu = int(p->rtpu);
+    const std::uint64_t deadline = p->deadline, timeout_ns = p->timeout_ns;
+    bp::Attachment* a = bp::current();
+    if (!a) return set_error("not attached to a backplane"), -ENOTCONN;
+    bp::RtpuEntry* e = a->rtpu(p->rtpu);
 
     // 3. Wait for the reply, in slices, watching the target.
     auto* word = reinterpret_cast<std::uint32_t*>(&r->reply);
@@ -248,6 +266,25 @@ int call(int rtpu, Kind kind, const void* req, std::uint32_t len, void* reply, s
         if (slice > kSliceNs) slice = kSliceNs;
         ipc::wait_word(word, slice);  // -EINTR (a user signal): keep waiting, bounded
     }
+}
+
+
+void cancel(Pending* p) {
+    Record* r = p->r;
+    if (!r) return;
+    p->r = nullptr;
+    if (abandon(r, p->seq)) {  // the reply came: nobody will read it
+        std::uint32_t replied = make_state(p->seq, kReplied);
+        r->state.compare_exchange_strong(replied, make_state(p->seq, kFree), Rel, R);
+    }
+}
+
+int call(int rtpu, Kind kind, const void* req, std::uint32_t len, void* reply, std::uint32_t cap,
+         std::uint32_t* reply_len, std::uint64_t timeout_ns) {
+    if (reply_len) *reply_len = 0;
+    Pending p;
+    if (int e = post(rtpu, kind, req, len, timeout_ns, &p)) return e;
+    return await(&p, reply, cap, reply_len);
 }
 
 }  // namespace chm::xmail

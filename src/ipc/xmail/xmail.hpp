@@ -137,6 +137,21 @@ struct StopRequest {
 int call(int rtpu, Kind kind, const void* req, std::uint32_t len, void* reply, std::uint32_t cap,
          std::uint32_t* reply_len, std::uint64_t timeout_ns);
 
+// call() in two halves, for a sender that keeps several requests in flight
+// (the extended file system's read-ahead): post claims, writes and posts
+// the record and rings the target (the transport errors of call); await
+// waits for its reply exactly as call does; cancel gives a posted request
+// up (the server may still carry it out; its reply is dropped). A Pending
+// is used by one task at a time; `r` is nullptr when nothing is posted.
+struct Pending {
+    Record* r = nullptr;
+    std::uint32_t seq = 0, rtpu = 0, status = 0;  // status: the target's slot word at post
+    std::uint64_t deadline = 0, timeout_ns = 0;
+};
+int post(int rtpu, Kind kind, const void* req, std::uint32_t len, std::uint64_t timeout_ns, Pending* p);
+int await(Pending* p, void* reply, std::uint32_t cap, std::uint32_t* reply_len);
+void cancel(Pending* p);
+
 // Reclaim records of `ring` whose owner died or whose write went stale.
 // Any process; returns the number freed.
 unsigned reclaim(const bp::View& v, bp::RingHeader* ring);
