@@ -7,8 +7,11 @@
  * a large host file beside a 1 kHz loop (a direct read() of a regular file
  * blocks the whole RTPU: the kernel cannot poll a disk). Data beyond what
  * one express-mail record carries moves through a transfer segment in
- * common memory ("chimera.hostio.<slot>", 4 x 64 KiB, made on first use);
- * each request moves at most 64 KiB, larger reads and writes are split.
+ * common memory ("chimera.hostio.<slot>", 4 x 256 KiB, made on first use);
+ * each request moves at most 256 KiB, larger reads and writes are split.
+ * Sequential reads of a regular file of at least 16 KiB are read ahead:
+ * up to 3 blocks of 256 KiB in flight, the position kept by the caller
+ * until another call on the handle (src/host/stream.cpp).
  *
  * Paths are relative to the calling RTPU's working directory on the host
  * (chm_host_chdir), itself beneath the root directory the host server was
@@ -73,7 +76,7 @@ int chm_xfs_close(int fd);
 
 /* Read up to `n` bytes at the handle's position (which moves on), or at
  * `offset` with chm_xfs_pread (the position stays). Returns the bytes read,
- * 0 at end of file. Requests of more than 64 KiB are split; a short read of
+ * 0 at end of file. Requests of more than 256 KiB are split; a short read of
  * one part ends the call.
  * Errors: -EBADF; -EFAULT buf NULL with n > 0; -EINVAL n > INT32_MAX or
  * offset < 0; the host's read(2) errors. */

@@ -86,7 +86,7 @@ struct Frame {
 static_assert(sizeof(Frame) == 16);
 inline constexpr std::uint32_t kFrameMax = 64 * 1024;
 
-inline constexpr std::uint32_t kBulkSize = 64 * 1024;
+inline constexpr std::uint32_t kBulkSize = 256 * 1024;
 inline constexpr std::uint32_t kBulkBuffers = 4;
 inline constexpr int kServerSlot = 0;
 

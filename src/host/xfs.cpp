@@ -1,6 +1,6 @@
 // The extended file system's calls (chimera/xfs.h): each builds HostRequests
 // (client.hpp); reads and writes beyond one record go through a lent
-// buffer of the transfer segment, 64 KiB per request.
+// buffer of the transfer segment, 256 KiB per request (kBulkSize).
 #include <algorithm>
 #include <cerrno>
 #include <climits>
@@ -40,7 +40,7 @@ void to_stat(const StatReply& s, chm_xfs_stat_t* out) {
     out->mode = s.mode;
 }
 
-// One part of a read (at most 64 KiB, or what fits inline).
+// One part of a read (at most kBulkSize, or what fits inline).
 // *asked: how many bytes this part asked for (a reply of fewer is short).
 std::int64_t read_part(int fd, char* dst, std::uint32_t n, std::int64_t offset, std::uint32_t* asked) {
     char what[64];

@@ -19,7 +19,7 @@ namespace {
 
 class HostTest : public RtpuTest {
 protected:
-    // Room for the transfer segments (4 x 64 KiB per client process).
+    // Room for the transfer segments (4 x 256 KiB per client process).
     static constexpr std::uint32_t kCommon = 2 * 1024 * 1024;
     void SetUp() override {
         RtpuTest::SetUp();
@@ -79,7 +79,7 @@ TEST_F(HostTest, ReadWriteSeekStatFromAHostThread) {
     EXPECT_NE(std::string(chm_xfs_last_error()).find("handle"), std::string::npos);
 
     // A write larger than a ring record and than one transfer buffer.
-    std::string big(200'000, 'x');
+    std::string big(600'000, 'x');  // more than a ring record and than a transfer buffer
     for (std::size_t i = 0; i < big.size(); ++i) big[i] = char('a' + i % 26);
     fd = chm_xfs_open("sub/big.bin", CHM_XFS_RDWR | CHM_XFS_CREAT | CHM_XFS_TRUNC, 0600);
     ASSERT_GE(fd, 0) << chm_xfs_last_error();
