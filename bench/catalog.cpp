@@ -142,6 +142,8 @@ constexpr RowInfo kRows[] = {
      "extended file system: sequential chm_xfs_read of 64 KiB blocks by a task (>= 0.5 x pread's throughput)"},
     {"host_call_rt", "ns", nullptr, kNull, none,
      "host procedure call round trip (chm_host_getcwd) from a task"},
+    {"console_line_latency", "ns", nullptr, kNull, none,
+     "a task's printf of a line to its arrival at the console (through the host server)"},
     // ---- the matrix library (issue 18 item 5), at a control loop's size
     {"mat_mul_6x6", "ns", "peer_eigen_mul_6x6", kNull, none,
      "chm_mat_mul of two 6x6 views into a third"},

@@ -7,12 +7,22 @@
 //    in turn. Target: >= 0.5 x pread's throughput (time <= 2 x).
 //  * host_call_rt: chm_host_getcwd, the smallest host procedure call: one
 //    request to the host server and its reply, round trip (no target).
+//  * console_line_latency: a task's printf of one line to its arrival at a
+//    console connected to the host server's socket (this process, a
+//    thread): the stamp the line carries against the arrival; median and
+//    range of 1,000 lines at 1 kHz (no target).
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <sys/socket.h>
+#include <sys/un.h>
+
+#include <algorithm>
+#include <atomic>
 #include <cerrno>
+#include <thread>
 #include <csignal>
 #include <cstdio>
 #include <cstring>
@@ -23,6 +33,8 @@
 #include "chimera/host.h"
 #include "chimera/rtpu.h"
 #include "chimera/xfs.h"
+#include "host/console.hpp"
+#include "host/hostio.hpp"
 #include "rtpu.hpp"
 
 namespace chm::bench {
@@ -135,6 +147,105 @@ void xfs_rows(Session& s) {
     s.emit("host_call_rt", where + "; chm_host_getcwd round trip", call.median, call.min, call.max);
 }
 CHM_BENCH_MEASUREMENT(xfs_rows, "xfs_read_64k", "peer_pread_64k", "host_call_rt");
+
+// A console on the host server's socket that owns RTPU 1 and records, for
+// every line "L <stamp>", the time from the stamp to its arrival.
+struct LineClock {
+    int sock = -1;
+    std::vector<double> ns;
+    std::atomic<int> got{0};
+    std::thread reader;
+    explicit LineClock(const std::string& bp) {
+        sockaddr_un a{};
+        a.sun_family = AF_UNIX;
+        const std::string path = bp + ".console";
+        std::snprintf(a.sun_path, sizeof a.sun_path, "%s", path.c_str());
+        sock = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+        for (int i = 0; connect(sock, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0; ++i) {
+            if (i > 1000) throw std::runtime_error("cannot reach the console socket " + path);
+            usleep(2000);
+        }
+        const std::uint32_t mask = 1u << 1;
+        const chm::host::Frame own{chm::host::kFrameOwn, 0, 0, sizeof mask};
+        if (send(sock, &own, sizeof own, 0) != ssize_t(sizeof own) || send(sock, &mask, sizeof mask, 0) != 4)
+            throw std::runtime_error("console socket: send failed");
+        reader = std::thread([this] { run(); });
+    }
+    bool read_all(void* p, std::size_t n) {
+        char* c = static_cast<char*>(p);
+        while (n) {
+            const ssize_t r = recv(sock, c, n, 0);
+            if (r <= 0) return false;
+            c += r;
+            n -= std::size_t(r);
+        }
+        return true;
+    }
+    void run() {
+        chm::host::Frame f;
+        std::vector<char> data;
+        while (read_all(&f, sizeof f) && f.len <= chm::host::kFrameMax) {
+            data.resize(f.len);
+            if (f.len && !read_all(data.data(), f.len)) return;
+            const std::uint64_t now = mono_ns();
+            if (f.type != chm::host::kFrameOut) continue;
+            for (std::uint32_t off = 0; off + sizeof(chm::host::Entry) <= f.len;) {
+                chm::host::Entry e;
+                std::memcpy(&e, data.data() + off, sizeof e);
+                unsigned long long stamp = 0;
+                if (std::sscanf(std::string(data.data() + off + sizeof e, e.len).c_str(), "L %llu", &stamp) == 1) {
+                    ns.push_back(double(now - stamp));
+                    got.fetch_add(1, std::memory_order_release);
+                }
+                off += sizeof e + e.len;
+            }
+        }
+    }
+    ~LineClock() {
+        shutdown(sock, SHUT_RDWR);
+        if (reader.joinable()) reader.join();
+        close(sock);
+    }
+};
+
+void console_rows(Session& s) {
+    Session::pin(s.cpu(0));
+    Root root;
+    ipcb::BackplaneFile f("console");
+    Server server(f.path, root.dir);
+    ipcb::Joined me(f.path, 1);
+    ipcb::wait_rtpus_running({0});
+    LineClock clock(f.path);
+    ipcb::Kernel k(1, 0);
+    if (const int r = chm::host::console::start(1)) throw std::runtime_error("console stdio: " + std::to_string(r));
+    struct Stop {
+        ~Stop() { chm::host::console::stop(); }
+    } stop;
+    const int lines = s.quick() ? 50 : 1000;
+    std::function<void()> body = [&] {
+        for (int i = 0; chm_rtpu_ping(0, nullptr) != 0; ++i)
+            if (i > 500) throw std::runtime_error("host server not answering");
+        for (int i = 0; i < lines; ++i) {
+            std::printf("L %llu\n", static_cast<unsigned long long>(mono_ns()));
+            chm_task_pause_until(chm_time_now() + 1'000'000);
+        }
+        for (int i = 0; clock.got.load(std::memory_order_acquire) < lines && i < 2000; ++i)
+            chm_task_pause_until(chm_time_now() + 1'000'000);
+    };
+    k.spawn(&body, 10, "printer");
+    k.run();
+    if (clock.got.load() < lines)
+        throw std::runtime_error("only " + std::to_string(clock.got.load()) + " of " + std::to_string(lines) +
+                                 " lines reached the console");
+    std::vector<double> v = clock.ns;
+    std::sort(v.begin(), v.end());
+    s.emit("console_line_latency",
+           "pinned " + s.cpu_name(0) + "; a task on RTPU 1 (this process, kernel FIXED) printf of one line, "
+           "through the stdio drainer (priority 1) and chimera-rtpu --host-server (defaults) to a console on its "
+           "socket (a thread here); median of " + std::to_string(v.size()) + " lines at 1 kHz, min .. max",
+           v[v.size() / 2], v.front(), v.back());
+}
+CHM_BENCH_MEASUREMENT(console_rows, "console_line_latency");
 
 }  // namespace
 }  // namespace chm::bench
