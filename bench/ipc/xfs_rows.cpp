@@ -84,13 +84,22 @@ struct Server {
     }
 };
 
+// A file in a root, a private backplane with the host server on it, this
+// process joined as RTPU 1: what every row here starts from.
+struct HostSystem {
+    Root root;
+    ipcb::BackplaneFile f;
+    Server server;
+    ipcb::Joined me;
+    explicit HostSystem(const char* what) : f(what), server(f.path, root.dir), me(f.path, 1) {
+        ipcb::wait_rtpus_running({0});
+    }
+};
+
 void xfs_rows(Session& s) {
     Session::pin(s.cpu(0));
-    Root root;
-    ipcb::BackplaneFile f("xfs");
-    Server server(f.path, root.dir);
-    ipcb::Joined me(f.path, 1);
-    ipcb::wait_rtpus_running({0});
+    HostSystem sys("xfs");
+    const Root& root = sys.root;
     ipcb::Kernel k(1, 0);
     Stats xfs, peer, call;
     std::function<void()> body = [&] {
@@ -210,12 +219,8 @@ struct LineClock {
 
 void console_rows(Session& s) {
     Session::pin(s.cpu(0));
-    Root root;
-    ipcb::BackplaneFile f("console");
-    Server server(f.path, root.dir);
-    ipcb::Joined me(f.path, 1);
-    ipcb::wait_rtpus_running({0});
-    LineClock clock(f.path);
+    HostSystem sys("console");
+    LineClock clock(sys.f.path);
     ipcb::Kernel k(1, 0);
     if (const int r = chm::host::console::start(1)) throw std::runtime_error("console stdio: " + std::to_string(r));
     struct Stop {

@@ -106,10 +106,9 @@ void bulk_give(Bulk b) {
     if (b.index) g_bulk_lent.fetch_and(~(1u << (b.index - 1)), std::memory_order_release);
 }
 
-int request(HostRequest h, const void* text, std::uint32_t text_len, void* reply, std::uint32_t cap,
-            std::uint32_t* reply_len, const char* what, std::uint64_t timeout_ns) {
+int post_request(HostRequest h, const void* text, std::uint32_t text_len, xmail::Pending* p, const char* what,
+                 std::uint64_t timeout_ns) {
     t_error[0] = 0;
-    if (reply_len) *reply_len = 0;
     if (!bp::current()) return set_error("%s: not attached to a backplane", what), -ENOTCONN;
     if (text_len > inline_room())
         return set_error("%s: %u bytes do not fit one request (%u)", what, text_len, inline_room()), -ENAMETOOLONG;
@@ -122,15 +121,22 @@ int request(HostRequest h, const void* text, std::uint32_t text_len, void* reply
     if (!buf) return set_error("%s: no memory for the request", what), -ENOMEM;
     std::memcpy(buf, &h, sizeof h);
     if (text_len) std::memcpy(buf + sizeof h, text, text_len);
-    if (!timeout_ns) timeout_ns = chm_host_timeout();
+    const int r = xmail::post(kServerSlot, xmail::kHost, buf, std::uint32_t(len),
+                              timeout_ns ? timeout_ns : chm_host_timeout(), p);
+    if (buf != small) std::free(buf);
+    if (r < 0) set_error("%s: host server: %s", what, chm_rtpu_last_error());
+    return r;
+}
+
+int await_request(xmail::Pending* p, void* reply, std::uint32_t cap, std::uint32_t* reply_len, const char* what) {
+    t_error[0] = 0;
+    if (reply_len) *reply_len = 0;
     // A refusal's reply is the server's reason: read it here when the
     // caller has no room for replies.
     char why[256];
     const bool own = cap < sizeof why;
     std::uint32_t n = 0;
-    const int r = xmail::call(kServerSlot, xmail::kHost, buf, std::uint32_t(len), own ? why : reply,
-                              own ? sizeof why - 1 : cap, &n, timeout_ns);
-    if (buf != small) std::free(buf);
+    const int r = xmail::await(p, own ? why : reply, own ? sizeof why - 1 : cap, &n);
     if (r >= 0) {
         if (own && reply && n) std::memcpy(reply, why, n < cap ? n : cap);
         if (reply_len) *reply_len = n;
@@ -148,30 +154,12 @@ int request(HostRequest h, const void* text, std::uint32_t text_len, void* reply
     return r;
 }
 
-int post_request(HostRequest h, xmail::Pending* p, const char* what) {
-    t_error[0] = 0;
-    if (!bp::current()) return set_error("%s: not attached to a backplane", what), -ENOTCONN;
-    h.text_len = 0;
-    const int r = xmail::post(kServerSlot, xmail::kHost, &h, sizeof h, chm_host_timeout(), p);
-    if (r < 0) set_error("%s: host server: %s", what, chm_rtpu_last_error());
-    return r;
-}
-
-int await_request(xmail::Pending* p, void* reply, std::uint32_t cap, std::uint32_t* reply_len, const char* what) {
-    char why[256];
-    std::uint32_t n = 0;
-    const int r = xmail::await(p, why, sizeof why - 1, &n);
-    if (r >= 0) {
-        if (reply && n) std::memcpy(reply, why, n < cap ? n : cap);
-        if (reply_len) *reply_len = n;
-        return r;
-    }
-    const char* transport = chm_rtpu_last_error();
-    if (*transport)
-        set_error("%s: host server: %s", what, transport);
-    else
-        set_error("%s: %s", what, n > 1 && n < sizeof why && why[n - 1] == 0 ? why : std::strerror(-r));
-    return r;
+int request(HostRequest h, const void* text, std::uint32_t text_len, void* reply, std::uint32_t cap,
+            std::uint32_t* reply_len, const char* what, std::uint64_t timeout_ns) {
+    if (reply_len) *reply_len = 0;
+    xmail::Pending p;
+    if (int e = post_request(h, text, text_len, &p, what, timeout_ns)) return e;
+    return await_request(&p, reply, cap, reply_len, what);
 }
 
 }  // namespace chm::host

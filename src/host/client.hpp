@@ -21,7 +21,8 @@ int request(HostRequest h, const void* text, std::uint32_t text_len, void* reply
 // request() in two halves (xmail::post / await), for the read-ahead that
 // keeps several requests in flight. post_request: 0 or a transport error
 // (message set); await_request: as request().
-int post_request(HostRequest h, xmail::Pending* p, const char* what);
+int post_request(HostRequest h, const void* text, std::uint32_t text_len, xmail::Pending* p, const char* what,
+                 std::uint64_t timeout_ns = 0);
 int await_request(xmail::Pending* p, void* reply, std::uint32_t cap, std::uint32_t* reply_len, const char* what);
 
 // Bytes of text (or reply payload) one request can carry inline.

@@ -94,7 +94,7 @@ void fill(Stream& s, int fd) {
         h.a = s.ahead;
         h.b = kBulkSize;
         h.bulk = b.index;
-        if (post_request(h, &k.p, what_of(fd)) != 0) {
+        if (post_request(h, nullptr, 0, &k.p, what_of(fd)) != 0) {
             bulk_give(b);
             return;  // the reader meets the error when it reads synchronously
         }
@@ -121,6 +121,20 @@ void pop(Stream& s) {
     --s.n;
 }
 
+// lseek of handle fd on the server: the new position into *at.
+int seek(int fd, std::uint64_t off, int whence, std::uint64_t* at) {
+    char what[48];
+    std::snprintf(what, sizeof what, "lseek of handle %d", fd);
+    HostRequest h{};
+    h.op = kSeek;
+    h.fd = fd;
+    h.a = off;
+    h.b = std::uint64_t(whence);
+    std::uint32_t got = 0;
+    const int r = request(h, nullptr, 0, at, sizeof *at, &got, what);
+    return r < 0 ? r : got == sizeof *at ? 0 : -EPROTO;
+}
+
 // Wait for every block in flight, give the buffers back, free the stream
 // and set the server's position to the reader's. Inside the stream.
 int finish(Stream& s, int fd) {
@@ -131,16 +145,8 @@ int finish(Stream& s, int fd) {
     }
     const std::uint64_t pos = s.pos;
     s.fd.store(-1, std::memory_order_release);
-    char what[48];
-    std::snprintf(what, sizeof what, "lseek of handle %d", fd);
-    HostRequest h{};
-    h.op = kSeek;
-    h.fd = fd;
-    h.a = pos;
-    h.b = SEEK_SET;
     std::uint64_t at = 0;
-    const int r = request(h, nullptr, 0, &at, sizeof at, nullptr, what);
-    return r < 0 ? r : 0;
+    return seek(fd, pos, SEEK_SET, &at);
 }
 
 }  // namespace
@@ -180,16 +186,8 @@ std::int64_t read(int fd, char* buf, std::size_t n, bool* used) {
         if (!s) return 0;
         if (!enter(*s)) return 0;
         // Where the reader is: the server's position, once.
-        char what[48];
-        std::snprintf(what, sizeof what, "read of handle %d", fd);
-        HostRequest h{};
-        h.op = kSeek;
-        h.fd = fd;
-        h.b = SEEK_CUR;
         std::uint64_t at = 0;
-        std::uint32_t got = 0;
-        const int r = request(h, nullptr, 0, &at, sizeof at, &got, what);
-        if (r < 0 || got != sizeof at) {
+        if (seek(fd, 0, SEEK_CUR, &at) != 0) {
             s->fd.store(-1);
             leave(*s);
             return 0;  // the ordinary path says what is wrong
