@@ -26,6 +26,7 @@
 #include "chimera/task.h"
 #include "chimera/xfs.h"
 #include "host/client.hpp"
+#include "ipc/backplane/backplane.hpp"
 
 namespace chm::host::stream {
 
@@ -45,6 +46,7 @@ struct Block {
 
 struct Stream {
     std::atomic<int> fd{-1};      // the handle streamed, -1: free
+    std::uint32_t attach = 0;     // bp::attach_count() it began in
     std::atomic<int> busy{0};     // a task is in it
     std::uint64_t pos = 0;        // the reader's position (next byte it reads)
     std::uint64_t ahead = 0;      // offset of the next block to post
@@ -74,8 +76,15 @@ bool enter(Stream& s) {
 void leave(Stream& s) { s.busy.store(0, std::memory_order_release); }
 
 Stream* find(int fd) {
-    for (Stream& s : g_streams)
-        if (s.fd.load(std::memory_order_acquire) == fd) return &s;
+    for (Stream& s : g_streams) {
+        if (s.fd.load(std::memory_order_acquire) != fd) continue;
+        if (s.attach == bp::attach_count()) return &s;
+        // Begun on an earlier attachment: its records were in a mapping
+        // that is gone, and its handle was another server's.
+        s.n = s.head = 0;
+        s.busy.store(0);
+        s.fd.store(-1);
+    }
     return nullptr;
 }
 
@@ -193,6 +202,7 @@ std::int64_t read(int fd, char* buf, std::size_t n, bool* used) {
             return 0;  // the ordinary path says what is wrong
         }
         s->pos = s->ahead = at;
+        s->attach = bp::attach_count();
         s->eof = false;
         s->head = s->n = 0;
     } else if (!enter(*s)) {

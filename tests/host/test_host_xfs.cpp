@@ -344,6 +344,27 @@ TEST_F(HostTest, TasksAreConfinedAndRunProgramsToo) {
     EXPECT_EQ(stat((root_ + "/from-task").c_str(), &st), 0);
 }
 
+// A worker stuck in the host's own call (the open of a FIFO nobody writes)
+// does not hold the host server's stop: it ends within its bound, and the
+// task waiting gets an error.
+TEST_F(HostTest, AStopIsNotHeldByAStuckHostCall) {
+    ASSERT_EQ(mkfifo((root_ + "/nobody").c_str(), 0600), 0);
+    ASSERT_NO_FATAL_FAILURE(probe({"block", "nobody"}));
+    nap_ms(200);  // the server's worker now waits in open()
+    ASSERT_EQ(kill(server_, SIGTERM), 0);
+    const std::uint64_t end = now_ms() + 8000;
+    int st = 0;
+    pid_t r = 0;
+    while ((r = waitpid(server_, &st, WNOHANG)) == 0 && now_ms() < end) nap_ms(20);
+    ASSERT_EQ(r, server_) << "the host server did not stop; " << read_file(err_of(0));
+    std::printf("stopped %llu ms after SIGTERM\n", static_cast<unsigned long long>(now_ms() + 8000 - end));
+    EXPECT_TRUE(WIFEXITED(st) && WEXITSTATUS(st) == 0) << st;
+    EXPECT_NE(read_file(err_of(0)).find("still in the host's calls at stop"), std::string::npos) << read_file(err_of(0));
+    ASSERT_TRUE(wait_text(probe_out(), "block error", 10000)) << read_file(probe_out());
+    EXPECT_NE(read_file(probe_out()).find("host server"), std::string::npos) << read_file(probe_out());
+    std::erase(children_, server_);
+}
+
 TEST_F(HostTest, AHostServerThatDiesFailsTheRequestNotTheTask) {
     const std::string fifo = root_ + "/never";
     ASSERT_EQ(mkfifo(fifo.c_str(), 0600), 0);

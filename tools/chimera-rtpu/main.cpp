@@ -182,6 +182,7 @@ Options parse(int argc, char** argv) {
     if (o.rtpu == 0 && !o.host_root) bad("%s", "RTPU 0 is the host server's slot (--host-server ROOT); RTPUs are numbered from 1");
     if (o.rtpu != 0 && o.host_root) bad("%s", "--host-server runs in slot 0 only (--rtpu 0)");
     if (o.allow_shell && !o.host_root) bad("%s", "--host-allow-shell is an option of --host-server");
+    if (o.host_root && !o.name) o.name = "host-server";  // how status and the table show slot 0
     // Programs: PATH [ARG...], separated by "--".
     while (i < argc) {
         if (!std::strcmp(argv[i], "--")) {

@@ -4,6 +4,7 @@
 // buffer index is checked), does the work and answers with xmail::finish.
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cerrno>
 #include <condition_variable>
 #include <csignal>
@@ -55,6 +56,7 @@ struct State {
     std::condition_variable cv;
     bool stopping = false;
     std::vector<std::thread> workers;
+    std::atomic<int> working{0};          // workers not yet returned
     std::vector<char> task_rep;           // the server task's reply buffer
     Client clients[CHM_BP_MAX_SLOTS];
     Handle handles[CHM_XFS_OPEN_MAX * 4];
@@ -332,6 +334,9 @@ bool quick(const HostRequest& h, std::uint32_t owner) {
 }
 
 void worker_main() {
+    struct Done {
+        ~Done() { g->working.fetch_sub(1); }
+    } done;
     sigset_t all;
     sigfillset(&all);
     pthread_sigmask(SIG_BLOCK, &all, nullptr);  // signals are the kernel thread's
@@ -414,6 +419,7 @@ int start(const Options& o) {
     g->queue.reserve(g->jobs.size());
     for (unsigned i = 0; i < (o.workers ? o.workers : 1); ++i) {
         try {
+            g->working.fetch_add(1);
             g->workers.emplace_back(worker_main);
         } catch (...) {
             stop();
@@ -462,6 +468,20 @@ void stop() {
     run_stop_all();  // a worker waiting for a program would hold the stop
     console_stop();  // and one waiting for console input
     g->cv.notify_all();
+    // A worker may be stuck in the host's own call (an open of a FIFO that
+    // no one writes): after a second it is left behind with the state it
+    // uses, and the process ends without it.
+    // (Time read from the clock: the kernel's tick signal cuts sleeps short.)
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(1);
+    while (g->working.load() > 0 && std::chrono::steady_clock::now() < until) ::usleep(10000);
+    if (g->working.load() > 0) {
+        std::fprintf(stderr, "chimera-rtpu: host server: %d request(s) still in the host's calls at stop: left\n",
+                     g->working.load());
+        for (std::thread& t : g->workers) t.detach();
+        g = nullptr;  // not freed: those workers still use it
+        fs_fini();
+        return;
+    }
     for (std::thread& t : g->workers) t.join();
     for (Handle& h : g->handles)
         if (h.fd >= 0) ::close(h.fd);
