@@ -110,8 +110,10 @@ int chm_xfs_ioctl(int fd, unsigned long request, void* arg, size_t arg_size);
  * saying why. fclose closes the handle. */
 FILE* chm_xfs_fopen(const char* path, const char* mode);
 
-/* What the last failing chm_xfs_* or chm_host_* call of this task (or
- * thread) said, or "". */
+/* What the last failing chm_xfs_* or chm_host_* call of this thread said,
+ * or "". The tasks of an RTPU share its one thread: read it right after
+ * the failing call, before the task can be preempted by another that
+ * fails too. */
 const char* chm_xfs_last_error(void);
 
 #ifdef __cplusplus

@@ -32,6 +32,7 @@ protected:
         std::vector<std::string> args = {CHIMERA_BIN, "console", "--backplane", bp_};
         args.insert(args.end(), extra.begin(), extra.end());
         ASSERT_TRUE(t.start([&] {
+            setenv("HOME", dir_.c_str(), 1);  // its history file goes there, not into the user's home
             std::vector<char*> argv;
             for (std::string& a : args) argv.push_back(a.data());
             argv.push_back(nullptr);

@@ -8,6 +8,8 @@
 #include <string>
 #include <vector>
 
+#include "chimera/task.h"
+
 namespace chimera_cmd {
 
 // Every subcommand's options; each uses what concerns it.
@@ -65,6 +67,8 @@ int cmd_rm(const Options& o);
 int cmd_load(const Options& o, const std::vector<const char*>& args);
 int cmd_kill(const Options& o, const std::vector<const char*>& args);
 int cmd_stop_one(const Options& o);
+// A task state as status and the console print it (status.cpp).
+const char* task_state(chm_task_state s);
 // `chimera console [--rtpus LIST] [--script FILE]` (console.cpp).
 int cmd_console(const Options& o, const std::vector<const char*>& args);
 // `chimera objects` (objects.cpp).

@@ -248,9 +248,9 @@ int cmd_tasks(chm_cmdi_t* c, int argc, char** argv, void*) {
     int total = 0;
     const int k = chm_rtpu_tasks(n, t, 64, &total);
     if (k < 0) return remote_error(c, k);
-    chm_cmdi_printf(c, "%6s  %-20s %10s %12s %10s\n", "id", "name", "state", "cycles", "misses");
+    chm_cmdi_printf(c, "%8s  %-20s %-10s %12s %10s\n", "id", "name", "state", "cycles", "misses");
     for (int i = 0; i < k; ++i)
-        chm_cmdi_printf(c, "%6d  %-20s %10d %12llu %10llu\n", int(t[i].id), t[i].name, int(t[i].state),
+        chm_cmdi_printf(c, "%8d  %-20s %-10s %12llu %10llu\n", int(t[i].id), t[i].name, task_state(t[i].state),
                         static_cast<unsigned long long>(t[i].cycles), static_cast<unsigned long long>(t[i].misses));
     return 0;
 }
@@ -392,6 +392,13 @@ int cmd_console(const Options& o, const std::vector<const char*>& args) {
     g.cmdi = chm_cmdi_create("chimera");
     if (!g.cmdi) return 1;
     add_commands(g.cmdi);
+    // History across sessions, as a shell keeps it (a missing file is an
+    // empty history; one that cannot be read is said and ignored).
+    if (const char* home = std::getenv("HOME"); home && *home && isatty(0)) {
+        const std::string history = std::string(home) + "/.chimera_history";
+        if (chm_cmdi_history_file(g.cmdi, history.c_str()) != 0)
+            std::printf("chimera console: history %s: %s\n", history.c_str(), chm_cmdi_last_error(g.cmdi));
+    }
     if (script && chm_cmdi_run_script(g.cmdi, script) != 0) std::printf("%s\n", chm_cmdi_last_error(g.cmdi));
     std::fflush(stdout);
     begin_commands();

@@ -24,16 +24,16 @@
 
 namespace chimera_cmd {
 
+const char* task_state(chm_task_state s) {
+    static const char* const kNames[] = {"ready", "running", "blocked", "suspended", "waitperiod", "paused", "ended"};
+    return unsigned(s) < 7 ? kNames[s] : "?";
+}
+
 namespace {
 
 const char* state_name(chm_bp_slot_state s) {
     static const char* const kNames[] = {"FREE", "JOINING", "RUNNING", "LEAVING", "DEAD", "RECOVERING"};
     return unsigned(s) < 6 ? kNames[s] : "?";
-}
-
-const char* task_state(chm_task_state s) {
-    static const char* const kNames[] = {"ready", "running", "blocked", "suspended", "waitperiod", "paused", "ended"};
-    return unsigned(s) < 7 ? kNames[s] : "?";
 }
 
 const char* policy_name(chm_sched_policy p) {
