@@ -13,7 +13,9 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
+#include <initializer_list>
 #include <cstdlib>
 #include <string>
 
@@ -69,6 +71,29 @@ struct Pty {
             const ssize_t n = read(master, buf, sizeof buf);
             if (n <= 0) return seen.find(want, mark) != std::string::npos;  // the child is gone
             seen.append(buf, static_cast<std::size_t>(n));
+        }
+    }
+
+    // Read until every one of `wants` appears somewhere after `from` (in
+    // any order: two sources, such as a task's output and the console's
+    // own notice, may reach the terminal either way round), or the wait
+    // ends; then the mark moves past all of them.
+    bool read_all_of(std::initializer_list<std::string> wants, std::size_t from) {
+        const auto end = std::chrono::steady_clock::now() + std::chrono::milliseconds(wait_ms);
+        for (;;) {
+            std::size_t last = from;
+            bool all = true;
+            for (const std::string& w : wants) {
+                const std::size_t at = seen.find(w, from);
+                if (at == std::string::npos) all = false;
+                else last = std::max(last, at + w.size());
+            }
+            if (all) {
+                mark = std::max(mark, last);
+                return true;
+            }
+            if (std::chrono::steady_clock::now() >= end) return false;
+            pump(50);
         }
     }
 

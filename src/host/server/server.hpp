@@ -15,7 +15,7 @@ namespace chm::host::server {
 struct Options {
     const char* root = ".";     // every path is resolved beneath it
     bool allow_shell = false;   // chm_host_run may start a shell
-    unsigned workers = 6;       // requests served at once
+    unsigned workers = 16;      // requests that may wait at once (stdin reads, FIFOs, programs)
     const char* console_socket = nullptr;  // where consoles connect (NULL: none)
 };
 
