@@ -478,7 +478,8 @@ void stop() {
         std::fprintf(stderr, "chimera-rtpu: host server: %d request(s) still in the host's calls at stop: left\n",
                      g->working.load());
         for (std::thread& t : g->workers) t.detach();
-        g = nullptr;  // not freed: those workers still use it
+        // g stays, not freed: those workers still use it, until the
+        // process ends. Their host calls fail once the root is closed.
         fs_fini();
         return;
     }
