@@ -180,22 +180,12 @@ struct LineClock {
             throw std::runtime_error("console socket: send failed");
         reader = std::thread([this] { run(); });
     }
-    bool read_all(void* p, std::size_t n) {
-        char* c = static_cast<char*>(p);
-        while (n) {
-            const ssize_t r = recv(sock, c, n, 0);
-            if (r <= 0) return false;
-            c += r;
-            n -= std::size_t(r);
-        }
-        return true;
-    }
     void run() {
         chm::host::Frame f;
         std::vector<char> data;
-        while (read_all(&f, sizeof f) && f.len <= chm::host::kFrameMax) {
+        while (chm::host::recv_all(sock, &f, sizeof f) && f.len <= chm::host::kFrameMax) {
             data.resize(f.len);
-            if (f.len && !read_all(data.data(), f.len)) return;
+            if (f.len && !chm::host::recv_all(sock, data.data(), f.len)) return;
             const std::uint64_t now = mono_ns();
             if (f.type != chm::host::kFrameOut) continue;
             for (std::uint32_t off = 0; off + sizeof(chm::host::Entry) <= f.len;) {

@@ -12,8 +12,11 @@
 // it touches anything.
 #pragma once
 
+#include <cerrno>
 #include <cstdint>
 #include <cstdio>
+
+#include <sys/socket.h>
 
 namespace chm::host {
 
@@ -85,6 +88,20 @@ struct Frame {
 };
 static_assert(sizeof(Frame) == 16);
 inline constexpr std::uint32_t kFrameMax = 64 * 1024;
+
+// Read exactly n bytes of a console socket (frames are read whole): false
+// at its end or on an error.
+inline bool recv_all(int fd, void* buf, std::size_t n) {
+    char* p = static_cast<char*>(buf);
+    while (n) {
+        const ssize_t r = ::recv(fd, p, n, 0);
+        if (r < 0 && errno == EINTR) continue;
+        if (r <= 0) return false;
+        p += r;
+        n -= std::size_t(r);
+    }
+    return true;
+}
 
 inline constexpr std::uint32_t kBulkSize = 256 * 1024;
 inline constexpr std::uint32_t kBulkBuffers = 4;

@@ -38,6 +38,7 @@ namespace {
 
 using chm::host::Entry;
 using chm::host::Frame;
+using chm::host::recv_all;
 
 struct Console {
     int sock = -1;
@@ -65,17 +66,6 @@ bool write_all(int fd, const void* p, std::size_t n) {
     return true;
 }
 
-bool read_all(int fd, void* p, std::size_t n) {
-    char* s = static_cast<char*>(p);
-    while (n) {
-        const ssize_t r = ::recv(fd, s, n, 0);
-        if (r < 0 && errno == EINTR) continue;
-        if (r <= 0) return false;
-        s += r;
-        n -= std::size_t(r);
-    }
-    return true;
-}
 
 bool send_frame(std::uint32_t type, std::uint32_t rtpu, const void* data, std::uint32_t len) {
     const Frame f{type, rtpu, 0, len};
@@ -120,9 +110,9 @@ void end_feed() {
 // A frame from the host server. False: the connection is gone.
 bool on_server() {
     Frame f;
-    if (!read_all(g.sock, &f, sizeof f) || f.len > chm::host::kFrameMax) return false;
+    if (!recv_all(g.sock, &f, sizeof f) || f.len > chm::host::kFrameMax) return false;
     std::vector<char> data(f.len);
-    if (f.len && !read_all(g.sock, data.data(), f.len)) return false;
+    if (f.len && !recv_all(g.sock, data.data(), f.len)) return false;
     if (f.rtpu >= CHM_BP_MAX_SLOTS) return true;
     if (f.type == chm::host::kFrameOut) {
         std::string text;

@@ -91,17 +91,6 @@ Console* owner_of(std::uint32_t slot) {
     return nullptr;
 }
 
-bool read_all(int fd, void* buf, std::size_t n) {
-    char* p = static_cast<char*>(buf);
-    while (n) {
-        const ssize_t r = ::recv(fd, p, n, 0);
-        if (r < 0 && errno == EINTR) continue;
-        if (r <= 0) return false;
-        p += r;
-        n -= std::size_t(r);
-    }
-    return true;
-}
 
 // A frame header, with the descriptors a kFrameTerminal carries.
 bool read_header(int fd, Frame* f, int fds[3], int* nfds) {
@@ -127,7 +116,7 @@ bool read_header(int fd, Frame* f, int fds[3], int* nfds) {
                 else ::close(d);
             }
         }
-    return std::size_t(r) == sizeof *f || read_all(fd, reinterpret_cast<char*>(f) + r, sizeof *f - std::size_t(r));
+    return std::size_t(r) == sizeof *f || recv_all(fd, reinterpret_cast<char*>(f) + r, sizeof *f - std::size_t(r));
 }
 
 // One frame from console i (its socket is readable). False: drop it.
@@ -149,7 +138,7 @@ bool on_frame(std::size_t i) {
         return true;
     }
     std::vector<char> data(f.len);
-    if (f.len && !read_all(fd, data.data(), f.len)) return false;
+    if (f.len && !recv_all(fd, data.data(), f.len)) return false;
     std::lock_guard<std::mutex> l(c->mu);
     Console& k = c->consoles[i];
     switch (f.type) {
