@@ -13,13 +13,17 @@
 
 static chm_msgq_t *g_sense, *g_reply;
 static uint64_t g_samples, g_answers, g_unanswered;
+static volatile int g_done; /* the task saw loop.sense go: its counts are final */
 
 static void controller(void *arg) {
     (void)arg;
     for (;;) {
         loop_sample_t s;
         const int n = chm_msgq_receive(g_sense, &s, sizeof s, NULL);
-        if (n == -EIDRM) return; /* the queue went: the RTPU is stopping */
+        if (n == -EIDRM) { /* the queue went: the RTPU is stopping */
+            g_done = 1;
+            return;
+        }
         if (n != (int)sizeof s) continue;
         const uint64_t now = chm_time_now();
         ++g_samples;
@@ -35,9 +39,12 @@ static void controller(void *arg) {
 
 static void on_shutdown(void *arg) {
     (void)arg;
+    /* First the queue goes, then the task ends (a sample it holds is
+     * answered first), then the counts are final (bounded wait). */
+    chm_msgq_destroy(LOOP_SENSE);
+    for (int i = 0; i < 20 && !g_done; ++i) chm_task_pause_until(chm_time_now() + 1000000);
     printf("controller: shutdown hook: %llu samples received, %llu answered, %llu could not be answered\n",
            (unsigned long long)g_samples, (unsigned long long)g_answers, (unsigned long long)g_unanswered);
-    chm_msgq_destroy(LOOP_SENSE);
 }
 
 int main(int argc, char **argv) {

@@ -16,6 +16,11 @@ static chm_msgq_t *g_reply, *g_stats, *g_sense;
 static uint64_t g_sent, g_answered, g_lost, g_unsent, g_stats_dropped, g_safe_cycles;
 static int g_controller = -1; /* RTPU of the last answer */
 static volatile uint32_t g_misses;
+/* The stop: the shutdown hook asks (g_stop), the loop ends at the top of
+ * its next cycle and sends no more; the hook joins it, so the counts it
+ * prints are final. */
+static volatile int g_stop;
+static chm_tid_t g_loop = CHM_TID_NONE;
 
 /* A late cycle runs on: the miss is counted and reported through
  * loop.stats, not printed 1000 times a second. */
@@ -64,6 +69,7 @@ static void sensor(void *arg) {
     unsigned silent = 0; /* cycles in a row without an answer */
     int safe = 0;        /* 1: at the safe output */
     for (uint64_t seq = 1;; ++seq) {
+        if (g_stop) return;
         const uint64_t release = chm_task_cycle_release();
         const uint64_t t0 = chm_time_now();
         loop_stat_t st = {.seq = seq, .release_late_ns = (uint32_t)(t0 - release)};
@@ -121,9 +127,11 @@ static void sensor(void *arg) {
 
 static void on_shutdown(void *arg) {
     (void)arg;
-    chm_tid_t me;
     chm_task_status_t ts;
-    if (chm_task_find("sensor", &me) == 0 && chm_task_status(me, &ts) == 0)
+    /* The hook runs above the loop's priority; the loop sees the request
+     * within a cycle or two (bounded: a wedged loop does not hold the stop). */
+    g_stop = 1;
+    if (chm_task_join(g_loop, 20 * LOOP_PERIOD_NS, &ts) == 0 || chm_task_status(g_loop, &ts) == 0)
         printf("sensor: shutdown hook: %llu cycles, %llu samples sent, %llu answered, %llu answers lost, "
                "%llu not sent, %llu deadline misses, %llu stats records dropped, %llu cycles at the safe output\n",
                (unsigned long long)ts.cycles, (unsigned long long)g_sent, (unsigned long long)g_answered,
@@ -146,14 +154,14 @@ int main(int argc, char **argv) {
     a.wcet_ns = LOOP_PERIOD_NS * 7 / 10;
     a.critical = 1;
     a.on_deadline = on_miss;
-    chm_tid_t tid;
-    const int r = chm_task_spawn(&tid, sensor, NULL, &a);
+    a.joinable = 1; /* the shutdown hook joins it */
+    const int r = chm_task_spawn(&g_loop, sensor, NULL, &a);
     if (r) {
         printf("sensor: cannot spawn the loop: %s\n", strerror(-r));
         return 1;
     }
     chm_kernel_on_shutdown(on_shutdown, NULL);
     printf("sensor: 1 kHz loop on RTPU %d (task %d): samples to %s, answers on %s, figures on %s\n",
-           chm_bp_self(), (int)tid, LOOP_SENSE, LOOP_REPLY, LOOP_STATS);
+           chm_bp_self(), (int)g_loop, LOOP_SENSE, LOOP_REPLY, LOOP_STATS);
     return 0;
 }

@@ -65,9 +65,10 @@ void ring_put(const void* src, std::uint32_t n) {
     g.head += n;
 }
 
-void ring_get(void* dst, std::uint32_t n) {
+// Copy n bytes from `at` bytes past the tail; nothing is taken out.
+void ring_peek(std::uint32_t at, void* dst, std::uint32_t n) {
     char* p = static_cast<char*>(dst);
-    for (std::uint32_t i = 0; i < n; ++i) p[i] = g.queue[(g.tail + i) % kQueueBytes];
+    for (std::uint32_t i = 0; i < n; ++i) p[i] = g.queue[(g.tail + at + i) % kQueueBytes];
 }
 
 void to_log(int stream, const char* text, std::size_t n) {
@@ -169,7 +170,10 @@ ssize_t cookie_read(void*, char* buf, size_t n) {
     return ssize_t(r < int(got) ? r : int(got));
 }
 
-// The drainer: batches of whole entries, one request each, in order.
+// The drainer: batches of whole entries, one request each, in order. A
+// batch stays in the queue until its request has completed (delivered, or
+// written to the log): an RTPU stopped while the request is under way
+// still has the lines, and stop() writes them to the log.
 void drain(void*) {
     char batch[2048];
     for (;;) {
@@ -181,13 +185,13 @@ void drain(void*) {
             std::uint32_t n = 0;
             {
                 kernel::IrqGuard guard;
-                while (used() >= sizeof(Entry)) {
+                const std::uint32_t queued = used();
+                while (queued - n >= sizeof(Entry)) {
                     Entry e;
-                    ring_get(&e, sizeof e);
+                    ring_peek(n, &e, sizeof e);
                     const std::uint32_t k = sizeof e + e.len;
                     if (n + k > room) break;
-                    ring_get(batch + n, k);
-                    g.tail += k;
+                    ring_peek(n, batch + n, k);
                     n += k;
                 }
             }
@@ -205,6 +209,8 @@ void drain(void*) {
                     ++g.dropped;
                 }
             }
+            kernel::IrqGuard guard;
+            g.tail += n;  // only the drainer takes out, only here
         }
     }
 }
@@ -248,14 +254,15 @@ int start(int priority) {
 void stop() {
     if (!g.started) return;
     g.started = false;  // writes go to the log from here on
-    // What is still queued goes to the log, in order.
+    // What is still queued goes to the log, in order. That includes a
+    // batch whose request the stop interrupted: it may also have reached
+    // the console, but a line is never lost.
     while (used() >= sizeof(Entry)) {
         Entry e;
-        ring_get(&e, sizeof e);
+        ring_peek(0, &e, sizeof e);
         char text[kLineMax];
-        g.tail += sizeof e;
-        for (std::uint32_t k = 0; k < e.len; ++k) text[k] = g.queue[(g.tail + k) % kQueueBytes];
-        g.tail += e.len;
+        ring_peek(sizeof e, text, e.len);
+        g.tail += sizeof e + e.len;
         to_log(e.stream, text, e.len);
     }
     for (Partial& p : g.partial)

@@ -196,7 +196,8 @@ using TimerHeap = IndexedHeap<TimerNode, TimerLess, TimerSlot>;
 struct Kernel {
     bool initialised = false;
     bool running = false;
-    bool stopping = false;
+    bool stop_requested = false;  // chm_kernel_stop called: hooks running
+    bool stopping = false;        // hooks done: the run loop returns
     // A task spun out idle_poll_ns before it parked (sync/remote_wait.cpp):
     // the idle loop sleeps without polling again.
     bool idle_poll_spent = false;

@@ -148,6 +148,31 @@ TEST_F(ConsoleTest, TwoConsolesEachOwnTheirRtpusAndALostOneBlocksNobody) {
     EXPECT_EQ(a.wait_exit(), 0) << a.seen;
 }
 
+// A batch of lines the drainer has sent to the host server when the RTPU
+// stops (here the host server is frozen, so its answer never comes) still
+// reaches the RTPU's log: the lines stay queued until their request ends.
+// (Found by the loop demo: a shutdown hook's line was lost.)
+TEST_F(ConsoleTest, LinesUnderWayWhenTheRtpuStopsReachItsLog) {
+    ASSERT_NO_FATAL_FAILURE(start_system(1));
+    chm_bp_status_t st;
+    ASSERT_EQ(chm_bp_status(&st), 0);
+    const pid_t host = st.slot[0].pid, rtpu = st.slot[1].pid;
+    ASSERT_GT(host, 0);
+    ASSERT_GT(rtpu, 0);
+    ASSERT_EQ(kill(host, SIGSTOP), 0);
+    Outcome r = chimera({"load", "1", PRINTER_SO, "1", "3", "frozen"});
+    EXPECT_EQ(r.status, 0) << r.err << r.out;
+    nap_ms(300);  // the drainer has taken the lines and waits for the host server
+    EXPECT_EQ(read_file(bp_ + ".rtpu1.log").find("frozen task 0 finished"), std::string::npos)
+        << "the lines went to the log before the stop: the test proves nothing";
+    ASSERT_EQ(kill(rtpu, SIGTERM), 0);
+    ASSERT_TRUE(wait_slot(1, CHM_BP_FREE, 10000));
+    kill(host, SIGCONT);
+    const std::string log = read_file(bp_ + ".rtpu1.log");
+    EXPECT_NE(log.find("frozen task 0 line 2 of 3"), std::string::npos) << log;
+    EXPECT_NE(log.find("frozen task 0 finished"), std::string::npos) << log;
+}
+
 TEST_F(ConsoleTest, EightTasksOnThreeRtpusPrint100000WholeLines) {
     ASSERT_NO_FATAL_FAILURE(start_system(3));
     Pty t;

@@ -236,6 +236,51 @@ TEST_F(Sync, DeadlineHandlerMayStopTheRtpuGracefully) {
     EXPECT_EQ(chm_time_now(), 4 * kMs + 1);
 }
 
+// A hook that blocks: the other tasks go on while it waits, and the run
+// loop returns only when it is done (a hook that waits for a loop to end
+// its cycle, as the loop demo's do, prints final counts).
+int g_cycles_after_stop = -1;
+int g_cycles = 0;
+volatile bool g_stop_asked = false;
+bool g_hook_done = false;
+void pausing_hook(void*) {
+    g_stop_asked = true;
+    const int before = g_cycles;
+    chm_task_pause_until(chm_time_now() + 5 * kMs);
+    g_cycles_after_stop = g_cycles - before;
+    g_hook_done = true;
+}
+void counting_loop(void*) {
+    for (;;) {
+        ++g_cycles;
+        chm_task_wait_period();
+    }
+}
+void stop_at_3ms(void*) {
+    chm_task_pause_until(3 * kMs);
+    chm_kernel_stop(7);
+}
+
+TEST_F(Sync, ShutdownHookMayBlockWhileTheOtherTasksRun) {
+    start(CHM_SCHED_MUF);
+    g_cycles = 0;
+    g_hook_done = false;
+    g_cycles_after_stop = -1;
+    ASSERT_EQ(chm_kernel_on_shutdown(pausing_hook, nullptr), 0);
+    chm_task_attr_t a;
+    chm_task_attr_init(&a);
+    a.name = "loop";
+    a.period_ns = 1 * kMs;
+    a.wcet_ns = kMs / 10;
+    chm_tid_t id;
+    ASSERT_EQ(chm_task_spawn(&id, counting_loop, nullptr, &a), 0);
+    spawn(stop_at_3ms, nullptr, "stopper", 50);
+    EXPECT_EQ(chm_kernel_run(), 7);
+    EXPECT_TRUE(g_hook_done) << "the run loop returned while the hook was paused";
+    EXPECT_EQ(g_cycles_after_stop, 5) << "the loop's releases at 4..8 ms ran while the hook waited";
+    EXPECT_EQ(chm_time_now(), 8 * kMs);
+}
+
 // ---- CPU lock
 void locked_low(void*) {
     chm_task_lock();

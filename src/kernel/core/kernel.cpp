@@ -152,12 +152,16 @@ int chm_kernel_run(void) {
 
 void chm_kernel_stop(int code) {
     port::irq_disable();
-    if (!g_k.stopping) {
-        g_k.stopping = true;
+    if (!g_k.stop_requested) {
+        g_k.stop_requested = true;
         g_k.stop_code = code;
         port::irq_restore();
-        run_shutdown_hooks();  // in the caller's context: hooks may block briefly
+        // In the caller's context, the other tasks still running: a hook
+        // may block (pause, wait for a task to finish its cycle). The run
+        // loop returns only once they are done.
+        run_shutdown_hooks();
         port::irq_disable();
+        g_k.stopping = true;
     }
     // Leave for the run loop; the tasks stay as they are until fini.
     Tcb* cur = g_k.current;
