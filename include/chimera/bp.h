@@ -11,7 +11,7 @@
  * same RTPU number after a crash needs no cleanup.
  *
  * Every function returns 0 or a negative errno-style status; after an
- * error, chm_bp_last_error() says what failed, naming the file and field. */
+ * error, chm_err_last() says what failed, naming the file and field. */
 #ifndef CHIMERA_BP_H
 #define CHIMERA_BP_H
 
@@ -61,7 +61,7 @@ int chm_bp_default_dir(char* buf, size_t len);
  * group or others. With `create` != 0 it is made first (mode 0700) when
  * missing. chm_bp_create, every attach and chimera's commands run this on
  * the default directory, so a directory another user made first (a
- * squatter) is refused, never used. Errors (chm_bp_last_error names the
+ * squatter) is refused, never used. Errors (chm_err_last names the
  * directory, its owner and mode, and the fix): -ELOOP a symbolic link;
  * -ENOTDIR not a directory; -EPERM another owner or group/other access;
  * -ENOENT missing (create == 0); other -errno from mkdir/lstat. */
@@ -75,7 +75,7 @@ int chm_bp_check_dir(const char* dir, int create);
  * group-writable only when it was created for that group (config.group:
  * mode 0660), in which case members of the group may attach too; in the
  * default directory, that directory must pass chm_bp_check_dir. Then the
- * header is validated. Errors (chm_bp_last_error names the file, its owner
+ * header is validated. Errors (chm_err_last names the file, its owner
  * and mode, and the fix): -ELOOP a symbolic link; -EPERM another owner, or
  * a mode that lets others (or, not made for it, the group) write;
  * -EBADMSG not a regular file, or not a valid backplane; -ENOENT; other
@@ -103,7 +103,7 @@ int chm_bp_create(const char* path, const chm_bp_config_t* cfg);
  * and every live message queue and remote semaphore (geometry, indices,
  * records). Read-only; `chimera start` and `chimera status` run it first.
  * Errors: -EBADMSG the file or an object in it is corrupt, and
- * chm_bp_last_error() names the file, the structure and the field;
+ * chm_err_last() names the file, the structure and the field;
  * -ENOENT no file; other -errno from open/mmap. */
 int chm_bp_validate(const char* path);
 
@@ -117,7 +117,7 @@ int chm_bp_validate(const char* path);
  * -ELOOP, -EPERM the file may not be attached (chm_bp_check_file);
  * -EBADMSG not a backplane, another layout version, or a structure in it
  * is corrupt (a slot state or kind, a ring's geometry, an arena header, a
- * registry entry's payload: see chm_bp_last_error, which names the field);
+ * registry entry's payload: see chm_err_last, which names the field);
  * -ETIMEDOUT a recovery of that slot by another
  * process did not finish within 5 s; other -errno from open/mmap. */
 int chm_bp_join(const char* path, int rtpu, const char* name);
@@ -141,7 +141,9 @@ int chm_bp_leave(void);
 int chm_bp_self(void);
 
 /* What the last failing chm_bp_* / chm_shm_* call of this thread said, or
- * "" when none failed yet. */
+ * "" when none failed yet.
+ * chm_err_last() (err.h) gives the same text per task, whatever the
+ * subsystem: use it; this call is kept for one release (CHANGELOG.md). */
 const char* chm_bp_last_error(void);
 
 /* Global error handling of IPC (chimera/err.h). A task with global handling
@@ -151,7 +153,7 @@ const char* chm_bp_last_error(void);
  * error signal of module "ipc": code = the errno value (EINVAL, ENOENT,
  * ENOTCONN, ECHRNG, EEXIST, ENAMETOOLONG, ENOMEM, ENOSPC, EMSGSIZE,
  * EPERM, ESRCH, EBADMSG, ENOTRECOVERABLE, EBADF, EFAULT), detail
- * = the chm_bp_last_error() message when the call left one. It is raised
+ * = the chm_err_last() message when the call left one. It is raised
  * when the call returns, holding no backplane lock; the default handler
  * prints one line and aborts only the task; a handler that continues makes
  * the call return its status, as with handling off. Outcomes are never

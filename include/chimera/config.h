@@ -12,7 +12,7 @@
  * replaced by the default.
  *
  * Every function returns 0 (chm_config_type: a type) or a negative
- * errno-style status. After an error, chm_config_last_error() gives a
+ * errno-style status. After an error, chm_err_last() gives a
  * message naming the place in the document:
  *     system.toml:12:11: module[1].rate_hz: expected an integer in [1, 10000], got integer 0
  *     system.toml:7:1: arm.gain: expected a number, got nothing (table 'arm' has no key 'gain')
@@ -70,7 +70,9 @@ void chm_config_close(chm_config_t* cfg);
 const char* chm_config_name(const chm_config_t* cfg);
 
 /* What the last failing chm_config_* call of this thread said, or "" when
- * none failed yet. */
+ * none failed yet.
+ * chm_err_last() (err.h) gives the same text per task, whatever the
+ * subsystem: use it; this call is kept for one release (CHANGELOG.md). */
 const char* chm_config_last_error(void);
 
 /* The type of the value at `key` (an enum chm_config_type; CHM_CONFIG_NONE
@@ -109,7 +111,7 @@ int chm_config_check_keys(const chm_config_t* cfg, const char* table, const char
 int chm_config_where(const chm_config_t* cfg, const char* key, char* buf, size_t len);
 
 /* Report a caller's own finding about the value at `key` in the house
- * format: sets chm_config_last_error() to "name:line:column: key: " and
+ * format: sets chm_err_last() to "name:line:column: key: " and
  * the printf-formatted message, and returns -EBADMSG (or -EINVAL for a
  * NULL or malformed argument). */
 int chm_config_error(const chm_config_t* cfg, const char* key, const char* fmt, ...)

@@ -11,7 +11,7 @@
  * Every call returns 0 (or a byte count / new descriptor) or a negative
  * status; none crashes on bad input. Every failing call also records a
  * message naming the problem (device, request, offset), readable with
- * chm_dev_last_error(); with global error handling on, the failure is
+ * chm_err_last(); with global error handling on, the failure is
  * raised as an error signal of module "dev" (see chm_dev_err_module).
  *
  * Calling context: any thread. On the kernel thread the driver call runs
@@ -163,12 +163,14 @@ int chm_dev_safe_stop_all(void);
 int chm_dev_open_count(void);
 
 /* The message of the last failing device call on this thread ("" if none):
- * names the call, the device and the problem. */
+ * names the call, the device and the problem.
+ * chm_err_last() (err.h) gives the same text per task, whatever the
+ * subsystem: use it; this call is kept for one release (CHANGELOG.md). */
 const char* chm_dev_last_error(void);
 
 /* Error signals (chimera/err.h). A task with global error handling on
  * gets every refusal above as an error signal of module "dev" (code: the
- * errno value, e.g. ENODEV; detail: the chm_dev_last_error() message),
+ * errno value, e.g. ENODEV; detail: the chm_err_last() message),
  * raised when the call returns, holding nothing; a handler that continues
  * makes the call return its status as when handling is off. Outcomes
  * (-EAGAIN, -ETIMEDOUT, -EINTR) and CHM_ACT_CLAMPED are never raised.

@@ -238,15 +238,51 @@ int chm_err_global_get(void);
 /* The UNIX calls, wrapped: exactly the libc call when global handling is
  * off or it succeeds (-1 or NULL with errno set on failure, like UNIX); a
  * "unix" error signal with code errno on failure when it is on. errno is
- * kept across the handler. Also usable outside tasks (never raising). */
+ * kept across the handler. A failure also leaves chm_err_last() naming the
+ * call, its path (open) and the cause. Also usable outside tasks (never
+ * raising). Errors: those of the libc call, in errno. */
+int chm_unix_open(const char* path, int flags, ...);
+int chm_unix_close(int fd);
+ssize_t chm_unix_read(int fd, void* buf, size_t n);
+ssize_t chm_unix_write(int fd, const void* buf, size_t n);
+off_t chm_unix_lseek(int fd, off_t off, int whence);
+int chm_unix_ioctl(int fd, unsigned long request, ...);
+/* chm_malloc (chimera/mem.h) whose NULL raises "unix" ENOMEM when on. */
+void* chm_unix_malloc(size_t size);
+
+/* The names before API 1.0 (chm_open beside chm_dev_open read as the same
+ * subsystem): the same calls, kept for one release (CHANGELOG.md). */
 int chm_open(const char* path, int flags, ...);
 int chm_close(int fd);
 ssize_t chm_read(int fd, void* buf, size_t n);
 ssize_t chm_write(int fd, const void* buf, size_t n);
 off_t chm_lseek(int fd, off_t off, int whence);
 int chm_ioctl(int fd, unsigned long request, ...);
-/* chm_malloc (chimera/mem.h) whose NULL raises "unix" ENOMEM when on. */
 void* chm_malloc_checked(size_t size);
+
+/* ------------------------------------------------------------- last error */
+
+/* Longest last-error text kept, with its terminating NUL. */
+#define CHM_ERR_LAST_MAX 256
+
+/* The text of the calling task's last error, whatever subsystem raised it:
+ * a failing call of the kernel, the backplane and its IPC, express mail
+ * and RTPU control, devices, programs, host files and calls, configuration
+ * files, matrices, servo modules, the command interpreter or the UNIX
+ * wrappers leaves here what went wrong, naming the call and what it was
+ * given; a failure with nothing more to say leaves "call: <strerror of the
+ * status>". Per task: the tasks of an RTPU never see each other's. Outside
+ * a task, per thread. It stays until the task's next failing call (a call
+ * that succeeds leaves it). Never NULL: "" before the first error. The
+ * text belongs to the task; copy it to keep it past the task's end.
+ * Any context but a signal handler. */
+const char* chm_err_last(void);
+
+/* Make the printf-style text the calling task's last error (libraries and
+ * control modules built on Chimera, so that their failures read like
+ * Chimera's own); at most CHM_ERR_LAST_MAX - 1 bytes are kept. NULL fmt
+ * does nothing. Any context but a signal handler. */
+void chm_err_set_last(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
 
 #ifdef __cplusplus
 }

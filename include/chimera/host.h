@@ -5,7 +5,7 @@
  *
  * Errors every call may return are those listed in chimera/xfs.h (the
  * transport: -ENOTCONN, -EHOSTDOWN, -ETIMEDOUT, -EBUSY, -EPERM); after an
- * error chm_xfs_last_error() says what failed. */
+ * error chm_err_last() says what failed. */
 #ifndef CHIMERA_HOST_H
 #define CHIMERA_HOST_H
 

@@ -35,7 +35,7 @@
  *            its matrix, a refused overlap, a workspace too small;
  *   -EDOM    a singular matrix (solve, inverse), or a NaN or infinity in
  *            the input of det, solve or inverse.
- * After a failure, chm_mat_last_error() names the call, the dimensions and
+ * After a failure, chm_err_last() names the call, the dimensions and
  * the problem ("chm_mat_mul: 3x4 times 3x4: inner dimensions differ") and
  * chm_mat_last_code() says which of the CHM_EMAT_* codes it was. With
  * global error handling on (chimera/err.h), the failure is also raised in
@@ -231,7 +231,9 @@ int chm_mat_inverse(const chm_mat_t* a, const chm_mat_t* out, double* work, size
 /* ------------------------------------------------------------ errors */
 
 /* The message of the last failing matrix call on this thread ("" if
- * none): the call, the dimensions and the problem. */
+ * none): the call, the dimensions and the problem.
+ * chm_err_last() (err.h) gives the same text per task, whatever the
+ * subsystem: use it; this call is kept for one release (CHANGELOG.md). */
 const char* chm_mat_last_error(void);
 
 /* The CHM_EMAT_* code of the last failing matrix call on this thread (0 if
@@ -241,7 +243,7 @@ int chm_mat_last_code(void);
 /* The id of error module "matrix" (registered on first use: its codes are
  * the CHM_EMAT_* above), or a negative status from chm_err_module_register.
  * Error signals carry call = the failing function's name and detail = the
- * chm_mat_last_error() message after that name. */
+ * chm_err_last() message after that name. */
 int chm_mat_err_module(void);
 
 #ifdef __cplusplus

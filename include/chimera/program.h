@@ -34,7 +34,7 @@ extern "C" {
  * (if not NULL) is main's task and the return value is the program's
  * number (>= 0). Call from the kernel thread before chm_kernel_run or from
  * a task.
- * Errors (nothing stays loaded; chm_program_error() names the file and the
+ * Errors (nothing stays loaded; chm_err_last() names the file and the
  * cause, once): -EINVAL path NULL or empty, argc < 0, or argv NULL with
  * argc > 0; -EPERM the kernel is not initialised; -ENOENT no such file;
  * -EACCES the file is not trusted (see below); -ENOEXEC not a loadable
@@ -70,7 +70,9 @@ int chm_program_trust_dir(const char* dir);
 int chm_program_status(int program, int* status);
 
 /* The last loading error's text, "FILE: cause" (for a file the dynamic
- * loader refused, its own words), or "" after a load that succeeded. */
+ * loader refused, its own words), or "" after a load that succeeded.
+ * chm_err_last() (err.h) gives the same text per task, whatever the
+ * subsystem: use it; this call is kept for one release (CHANGELOG.md). */
 const char* chm_program_error(void);
 
 #ifdef __cplusplus

@@ -28,7 +28,7 @@
  *   -EDEADLK    a request to the caller's own RTPU from its kernel thread
  *               outside a task (its server could never run);
  *   -EPERM      called from an interrupt handler.
- * After an error chm_rtpu_last_error() says what failed. */
+ * After an error chm_err_last() says what failed. */
 #ifndef CHIMERA_RTPU_H
 #define CHIMERA_RTPU_H
 
@@ -93,7 +93,7 @@ int chm_rtpu_ping(int rtpu, chm_rtpu_info_t* info);
  * be NULL) receives main's task id on that RTPU.
  * Errors: -EINVAL path NULL or empty, argc < 0, argv NULL with argc > 0;
  * and the target's chm_program_load errors, with its message ("RTPU n
- * cannot load FILE: cause") in chm_rtpu_last_error: -ENOENT no such file,
+ * cannot load FILE: cause") in chm_err_last: -ENOENT no such file,
  * -EACCES the target does not trust the file (the target's log names the
  * requesting slot), -ENOEXEC not a loadable shared object, one linked
  * against libchimera, or one without a main, -ENOSPC too many programs,
@@ -130,7 +130,9 @@ int chm_rtpu_tasks(int rtpu, chm_rtpu_task_t* out, int max, int* total);
  * leaves the backplane and exits. Returns 0 once the RTPU accepted. */
 int chm_rtpu_stop(int rtpu, int code);
 
-/* What the last failing chm_rtpu_* call of this thread said, or "". */
+/* What the last failing chm_rtpu_* call of this thread said, or "".
+ * chm_err_last() (err.h) gives the same text per task, whatever the
+ * subsystem: use it; this call is kept for one release (CHANGELOG.md). */
 const char* chm_rtpu_last_error(void);
 
 #ifdef __cplusplus

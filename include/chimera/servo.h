@@ -14,7 +14,7 @@
  * changes (unless CHM_SERVO_BEST_EFFORT).
  *
  * Requires this process to be attached to a backplane. Every call returns
- * 0 or a negative errno-style status; chm_servo_last_error() says what
+ * 0 or a negative errno-style status; chm_err_last() says what
  * failed, naming the module, RTPU, variable or parameter. Failures that
  * mean a bug or a missing resource are raised as error signals of module
  * "ipc" under global error handling (chimera/err.h). */
@@ -154,7 +154,9 @@ int chm_servo_kill(chm_servo_module_t m);
  * NULL out; express-mail errors but -EHOSTDOWN (reported as DEAD). */
 int chm_servo_status(chm_servo_module_t m, chm_servo_status_t* out);
 
-/* Why the calling thread's last servo call failed. */
+/* Why the calling thread's last servo call failed.
+ * chm_err_last() (err.h) gives the same text per task, whatever the
+ * subsystem: use it; this call is kept for one release (CHANGELOG.md). */
 const char* chm_servo_last_error(void);
 
 /* ------------------------------------------------------------- systems
@@ -189,7 +191,7 @@ typedef struct chm_servo_system chm_servo_system_t;
  * absent; -EBADMSG the file is wrong (the message gives file:line:column:
  * a syntax error, an unknown key, a value of the wrong type or out of
  * range, a variable declared twice, a module named twice on one RTPU);
- * -ENOMEM. chm_servo_system_last_error() says what failed. */
+ * -ENOMEM. chm_err_last() says what failed. */
 int chm_servo_system_open(const char* path, chm_servo_system_t** out);
 
 /* Declare every state variable of the file (chm_svar_declare). Errors:
@@ -230,7 +232,9 @@ int chm_servo_system_svar(const chm_servo_system_t* sys, size_t i, chm_svar_decl
 /* Free the description (modules run on; kill them with chm_servo_kill). */
 void chm_servo_system_close(chm_servo_system_t* sys);
 
-/* Why the calling thread's last chm_servo_system_ call failed. */
+/* Why the calling thread's last chm_servo_system_ call failed.
+ * chm_err_last() (err.h) gives the same text per task, whatever the
+ * subsystem: use it; this call is kept for one release (CHANGELOG.md). */
 const char* chm_servo_system_last_error(void);
 
 #ifdef __cplusplus

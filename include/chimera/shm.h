@@ -5,7 +5,7 @@
  *
  * Requires this process to be attached to a backplane (chimera/bp.h).
  * Every function returns 0 or a negative errno-style status; after an
- * error chm_bp_last_error() says what failed.
+ * error chm_err_last() says what failed.
  *
  * Errors under global handling (chimera/err.h): the statuses meaning a bug
  * or a missing resource (-EINVAL, -ENOENT, -ENOTCONN, -ECHRNG, -EEXIST,
@@ -35,7 +35,7 @@ extern "C" {
  * -EEXIST the name is taken; -ENOMEM no room in that window;
  * -ENOSPC the registry is full; -ENOTRECOVERABLE that window was damaged
  * by a process that died in it; -EBADMSG that window's block chain is
- * corrupt (chm_bp_last_error names the block and field); -ETIMEDOUT a live
+ * corrupt (chm_err_last names the block and field); -ETIMEDOUT a live
  * peer held the registry for more than 5 s; -ENOTCONN not attached. */
 int chm_shm_create(const char* name, size_t size, int where, void** out);
 
@@ -43,7 +43,7 @@ int chm_shm_create(const char* name, size_t size, int where, void** out);
  * its size. Attaching twice gives the same address and needs two detaches.
  * Errors: -EINVAL NULL name or out; -ENOENT no segment of that name;
  * -EBADMSG its registry entry is corrupt: offset and size do not describe
- * an allocated block of its memory (chm_bp_last_error names the field);
+ * an allocated block of its memory (chm_err_last names the field);
  * -ETIMEDOUT; -ENOTCONN. */
 int chm_shm_attach(const char* name, void** out, size_t* size);
 

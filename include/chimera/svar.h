@@ -32,7 +32,7 @@
  *
  * Requires this process to be attached to a backplane (chimera/bp.h).
  * Every function returns 0 (or a count) or a negative errno-style status;
- * after an error chm_bp_last_error() says what failed, naming the
+ * after an error chm_err_last() says what failed, naming the
  * variable. Failures that mean a bug or a missing resource are raised as
  * error signals of module "ipc" when the calling task has global handling
  * on (chimera/err.h), as for the other backplane calls. */
@@ -88,7 +88,7 @@ typedef struct {
  * Errors: -EINVAL NULL decl or name, empty name, unknown type, rows or
  * cols 0, more than CHM_SVAR_ELEMS_MAX elements; -ENAMETOOLONG name or
  * unit too long; -EEXIST the name is declared with another type, shape or
- * unit (chm_bp_last_error gives both declarations); -ENOSPC the table is
+ * unit (chm_err_last gives both declarations); -ENOSPC the table is
  * full (variables or value bytes); -ENOMEM no room in common memory for
  * the table; -EBADMSG the table in the file is corrupt (the message names
  * the entry and field); -ETIMEDOUT a live peer held the table past 5 s;
@@ -134,7 +134,7 @@ typedef struct chm_svar_set chm_svar_set_t;
  * Errors: -EINVAL NULL out or owner, NULL names with a count, a name
  * listed twice (in either list); -ENAMETOOLONG owner too long; -ENOENT a
  * name is not declared; -EBUSY an output has a live writer already
- * (chm_bp_last_error names the variable, that writer and this owner);
+ * (chm_err_last names the variable, that writer and this owner);
  * -ENOMEM no memory for the local copies; -EBADMSG a corrupt entry;
  * -ETIMEDOUT; -ENOTCONN. */
 int chm_svar_set_create(const char* owner, const char* const* inputs, size_t n_in,
@@ -153,7 +153,7 @@ int chm_svar_set_open(const char* owner, const char* const* inputs, size_t n_in,
  * going off to the one coming on; the old one may still finish the cycle
  * it is in). Claiming again takes back any output another set took
  * (displacing only the names given); outputs it holds stay as they are. Errors: -EINVAL NULL set or
- * names; -EBUSY an output has another live writer (chm_bp_last_error
+ * names; -EBUSY an output has another live writer (chm_err_last
  * names the variable, that writer and this owner); -ETIMEDOUT; -ENOTCONN
  * the set's attachment is gone. */
 int chm_svar_set_claim(chm_svar_set_t* set, const char* const* displace, size_t n_displace);
@@ -186,7 +186,7 @@ void* chm_svar_set_local(const chm_svar_set_t* set, const char* name);
 /* Copy-in: every input's current global value into its local copy, each
  * variable whole. Never blocks. Returns 0; -EAGAIN an input changed under
  * 64 attempts in a row (its local copy keeps the previous value, the
- * other inputs are copied; chm_bp_last_error names it); -EINVAL NULL. */
+ * other inputs are copied; chm_err_last names it); -EINVAL NULL. */
 int chm_svar_set_read(chm_svar_set_t* set);
 
 /* Copy-out: every output's local copy into the global table, each

@@ -20,7 +20,7 @@
  *
  * Callable from tasks and from threads of host processes attached to the
  * backplane. Every call returns >= 0 or a negative errno-style status, and
- * after an error chm_xfs_last_error() says what failed, naming the path or
+ * after an error chm_err_last() says what failed, naming the path or
  * handle. Errors every call may return, besides its own:
  *   -ENOTCONN   this process is not attached to a backplane;
  *   -EHOSTDOWN  no host server runs (slot 0 is free, dead or not serving),
@@ -106,14 +106,16 @@ int chm_xfs_ioctl(int fd, unsigned long request, void* arg, size_t arg_size);
 
 /* Buffered stdio over the extended file system: a FILE* (fopencookie) for
  * fprintf, fgets, fread, fseek... Mode as fopen(3) ("r", "w", "a", "r+",
- * "w+", "a+"). NULL on error, with errno set and chm_xfs_last_error()
+ * "w+", "a+"). NULL on error, with errno set and chm_err_last()
  * saying why. fclose closes the handle. */
 FILE* chm_xfs_fopen(const char* path, const char* mode);
 
 /* What the last failing chm_xfs_* or chm_host_* call of this thread said,
  * or "". The tasks of an RTPU share its one thread: read it right after
  * the failing call, before the task can be preempted by another that
- * fails too. */
+ * fails too.
+ * chm_err_last() (err.h) gives the same text per task, whatever the
+ * subsystem: use it; this call is kept for one release (CHANGELOG.md). */
 const char* chm_xfs_last_error(void);
 
 #ifdef __cplusplus

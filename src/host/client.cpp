@@ -17,6 +17,7 @@
 #include "chimera/xfs.h"
 #include "ipc/backplane/backplane.hpp"
 #include "ipc/xmail/xmail.hpp"
+#include "kernel/err/last.hpp"
 
 namespace chm::host {
 
@@ -79,6 +80,7 @@ void set_error(const char* fmt, ...) {
     va_start(ap, fmt);
     std::vsnprintf(t_error, sizeof t_error, fmt, ap);
     va_end(ap);
+    kernel::err_last_set(t_error);  // chm_err_last
 }
 void clear_error() { t_error[0] = 0; }
 

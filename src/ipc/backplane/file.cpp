@@ -17,6 +17,7 @@
 
 #include "chimera/bp.h"
 #include "ipc/backplane/backplane.hpp"
+#include "kernel/err/last.hpp"
 
 namespace chm::bp {
 
@@ -42,6 +43,7 @@ void set_error(const char* fmt, ...) {
     va_start(ap, fmt);
     std::vsnprintf(t_error, sizeof t_error, fmt, ap);
     va_end(ap);
+    kernel::err_last_set(t_error);  // chm_err_last
 }
 
 bool plan_layout(const Geometry& g, Header* h, char* why, std::size_t n) {

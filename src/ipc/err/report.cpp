@@ -56,6 +56,9 @@ void register_module() {
 }  // namespace
 
 int leave_failed(int status, const char* call) {
+    // chm_err_last: the backplane's message when this call set one (an
+    // error, not an outcome such as a full queue), else "call: strerror".
+    kernel::err_last_failed(call, status, raises(status));
     // Host threads and tasks without global handling: a status, as always.
     // Never under the mask (interrupt context or a kernel path).
     if (!raises(status) || !chm_err_global_get() || port::irq_masked()) return status;

@@ -11,6 +11,7 @@
 #include "chimera/kernel.h"
 #include "chimera/rtpu.h"
 #include "ipc/err/report.hpp"
+#include "kernel/err/last.hpp"
 #include "ipc/servo/servo.hpp"
 #include "ipc/xmail/xmail.hpp"
 
@@ -29,6 +30,7 @@ void say(const char* fmt, ...) {
     va_start(ap, fmt);
     std::vsnprintf(t_error, sizeof t_error, fmt, ap);
     va_end(ap);
+    kernel::err_last_set(t_error);  // chm_err_last
 }
 
 std::uint64_t now_ns() {

@@ -19,6 +19,7 @@
 #include "chimera/servo.h"
 #include "chimera/svar.h"
 #include "ipc/err/report.hpp"
+#include "kernel/err/last.hpp"
 
 struct chm_servo_system {
     struct Var {
@@ -52,6 +53,7 @@ int say(int r, const char* fmt, ...) {
     va_start(ap, fmt);
     std::vsnprintf(t_error, sizeof t_error, fmt, ap);
     va_end(ap);
+    chm::kernel::err_last_set(t_error);  // chm_err_last
     return r;
 }
 int from_config(int r) { return say(r, "%s", chm_config_last_error()); }

@@ -10,6 +10,7 @@
 #include "chimera/irq.h"
 #include "ipc/wake/wake.hpp"
 #include "ipc/xmail/xmail.hpp"
+#include "kernel/err/last.hpp"
 #include "kernel.hpp"
 #include "port.hpp"
 
@@ -99,6 +100,7 @@ void set_error(const char* fmt, ...) {
     va_start(ap, fmt);
     std::vsnprintf(t_error, sizeof t_error, fmt, ap);
     va_end(ap);
+    kernel::err_last_set(t_error);  // chm_err_last
 }
 
 }  // namespace chm::xmail

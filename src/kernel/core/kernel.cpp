@@ -102,13 +102,13 @@ void chm_kernel_config_init(chm_kernel_config_t* cfg) {
 }
 
 int chm_kernel_init(const chm_kernel_config_t* cfg) {
-    if (g_k.initialised) return -EBUSY;
+    if (g_k.initialised) return record_failure(-EBUSY, "chm_kernel_init");
     chm_kernel_config_t c;
     chm_kernel_config_init(&c);
     if (cfg) c = *cfg;
-    if (c.quantum_ns && c.quantum_ns < 10000) return -EINVAL;
+    if (c.quantum_ns && c.quantum_ns < 10000) return record_failure(-EINVAL, "chm_kernel_init");
     if (!c.io_poll_ns) c.io_poll_ns = 1000000;
-    if (c.io_poll_ns < 10000) return -EINVAL;
+    if (c.io_poll_ns < 10000) return record_failure(-EINVAL, "chm_kernel_init");
     if (!c.default_stack) c.default_stack = 64 * 1024;
     if (int e = sched_select(c.policy, c.user_sched, c.user_sched_arg)) return e;
     g_k.cfg = c;
@@ -136,7 +136,7 @@ int chm_kernel_init(const chm_kernel_config_t* cfg) {
 }
 
 int chm_kernel_run(void) {
-    if (!g_k.initialised || g_k.current) return -EPERM;
+    if (!g_k.initialised || g_k.current) return record_failure(-EPERM, "chm_kernel_run");
     port::irq_disable();
     g_k.errno_loc = &errno;  // tasks run on this thread only
     g_k.running = true;
@@ -177,9 +177,9 @@ void chm_kernel_stop(int code) {
 }
 
 int chm_kernel_on_shutdown(void (*hook)(void*), void* arg) {
-    if (!hook) return -EINVAL;
+    if (!hook) return record_failure(-EINVAL, "chm_kernel_on_shutdown");
     IrqGuard guard;
-    if (g_k.nhooks >= 32) return -ENOSPC;
+    if (g_k.nhooks >= 32) return record_failure(-ENOSPC, "chm_kernel_on_shutdown");
     g_k.hooks[g_k.nhooks++] = Kernel::Hook{hook, arg};
     return 0;
 }

@@ -64,6 +64,7 @@ int fail(int status, const char* call, const char* fmt, ...) {
     if (k > 0 && std::size_t(k) < sizeof t_last)
         std::vsnprintf(t_last + k, sizeof t_last - std::size_t(k), fmt, ap);
     va_end(ap);
+    kernel::err_last_set(t_last);  // chm_err_last
     return status;
 }
 

@@ -189,6 +189,7 @@ int err_raise(chm_err_info_t& info) {
 }
 
 int err_call_failed(int status, const char* call) {
+    err_last_failed(call, status, false);  // kernel calls set no message of their own
     if (!is_error_status(status)) return status;
     Tcb* cur = task_here();
     if (!cur || !cur->err || !cur->err->global) return status;
@@ -264,14 +265,14 @@ namespace port = chm::port;
 extern "C" {
 
 int chm_err_module_register(const char* name, const chm_err_code_t* codes, size_t ncodes) {
-    if (!name || !*name || std::strlen(name) >= sizeof g_modules[0].name) return -EINVAL;
-    if (!codes && ncodes) return -EINVAL;
+    if (!name || !*name || std::strlen(name) >= sizeof g_modules[0].name) return record_failure(-EINVAL, "chm_err_module_register");
+    if (!codes && ncodes) return record_failure(-EINVAL, "chm_err_module_register");
     for (std::size_t i = 0; i < ncodes; ++i)
-        if (codes[i].code <= 0) return -EINVAL;
+        if (codes[i].code <= 0) return record_failure(-EINVAL, "chm_err_module_register");
     IrqGuard guard;
     for (int m = 1; m <= g_nmodules; ++m)
-        if (std::strcmp(g_modules[m].name, name) == 0) return -EEXIST;
-    if (g_nmodules == CHM_ERR_MODULES_MAX) return -ENOSPC;
+        if (std::strcmp(g_modules[m].name, name) == 0) return record_failure(-EEXIST, "chm_err_module_register");
+    if (g_nmodules == CHM_ERR_MODULES_MAX) return record_failure(-ENOSPC, "chm_err_module_register");
     Module& m = g_modules[++g_nmodules];
     std::strcpy(m.name, name);
     m.codes = codes;
@@ -280,10 +281,10 @@ int chm_err_module_register(const char* name, const chm_err_code_t* codes, size_
 }
 
 int chm_err_module_find(const char* name) {
-    if (!name) return -EINVAL;
+    if (!name) return record_failure(-EINVAL, "chm_err_module_find");
     for (int m = 1; m <= g_nmodules; ++m)
         if (std::strcmp(g_modules[m].name, name) == 0) return m;
-    return -ENOENT;
+    return record_failure(-ENOENT, "chm_err_module_find");
 }
 
 const char* chm_err_module_name(int module) { return module_ok(module) ? g_modules[module].name : nullptr; }
@@ -300,7 +301,7 @@ const char* chm_err_message(int module, int code) {
 void chm_err_rtpu_set(int rtpu) { g_rtpu = rtpu; }
 
 int chm_err_invoke_at(int module, int code, const char* file, int line) {
-    if (!module_ok(module) || code <= 0) return -EINVAL;
+    if (!module_ok(module) || code <= 0) return record_failure(-EINVAL, "chm_err_invoke_at");
     chm_err_info_t info{};
     info.module = module;
     info.code = code;
@@ -332,7 +333,7 @@ int chm_err_on_module(int module, chm_err_handler_t h, void* arg) {
 
 int chm_err_on_task(chm_err_handler_t h, void* arg) {
     Tcb* cur = task_here();
-    if (!cur) return -EPERM;
+    if (!cur) return record_failure(-EPERM, "chm_err_on_task");
     ErrTask* e = err_task(cur, h != nullptr);
     if (!e) return h ? -ENOMEM : 0;
     e->task_h = h;
@@ -342,7 +343,7 @@ int chm_err_on_task(chm_err_handler_t h, void* arg) {
 
 int chm_err_scope_push(chm_err_scope_t* scope, chm_err_handler_t h, void* arg) {
     Tcb* cur = task_here();
-    if (!cur) return -EPERM;
+    if (!cur) return record_failure(-EPERM, "chm_err_scope_push");
     if (!scope || !h) return raise_or_return(-EINVAL, "chm_err_scope_push");
     ErrTask* e = err_task(cur, true);
     if (!e) return raise_or_return(-ENOMEM, "chm_err_scope_push");
@@ -354,7 +355,7 @@ int chm_err_scope_push(chm_err_scope_t* scope, chm_err_handler_t h, void* arg) {
 
 int chm_err_scope_pop(chm_err_scope_t* scope) {
     Tcb* cur = task_here();
-    if (!cur) return -EPERM;
+    if (!cur) return record_failure(-EPERM, "chm_err_scope_pop");
     ErrTask* e = err_task(cur, false);
     auto* s = reinterpret_cast<ErrScope*>(scope);
     if (!e || !s || e->scope != s || s->self != s) return raise_or_return(-EINVAL, "chm_err_scope_pop");
@@ -386,7 +387,7 @@ jmp_buf* chm_err_mark_arm_(chm_err_mark_t* m) {
 
 int chm_err_unmark(chm_err_mark_t* m) {
     Tcb* cur = task_here();
-    if (!cur) return -EPERM;
+    if (!cur) return record_failure(-EPERM, "chm_err_unmark");
     ErrTask* e = err_task(cur, false);
     if (!m || m->magic != kMarkMagic || !mark_in_chain(e, m))
         return raise_or_return(-EINVAL, "chm_err_unmark");
@@ -416,7 +417,7 @@ void chm_err_jump(chm_err_mark_t* m, int code) {
 
 int chm_err_global(int on) {
     Tcb* cur = task_here();
-    if (!cur) return -EPERM;
+    if (!cur) return record_failure(-EPERM, "chm_err_global");
     ErrTask* e = err_task(cur, on != 0);
     if (!e) return on ? -ENOMEM : 0;
     const int was = e->global;

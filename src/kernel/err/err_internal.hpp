@@ -7,6 +7,7 @@
 
 #include "chimera/err.h"
 #include "kernel.hpp"
+#include "kernel/err/last.hpp"
 
 namespace chm::kernel {
 
@@ -20,6 +21,15 @@ struct ErrScope {  // the layout of chm_err_scope_t
     void* self;  // == this while pushed
 };
 static_assert(sizeof(ErrScope) <= sizeof(chm_err_scope_t));
+
+// The last error of a task (or a thread): a subsystem's message, or a
+// failing call and its status, formatted when read.
+struct LastError {
+    char text[CHM_ERR_LAST_MAX] = {};
+    const char* call = nullptr;  // non-null: text is "call: strerror(status)", not made yet
+    int status = 0;
+    bool fresh = false;          // text set since the last failure exit
+};
 
 struct ErrBinding {  // a code handler (code > 0) or a module handler (code 0)
     int module = 0;
@@ -38,6 +48,7 @@ struct ErrTask {
     void* task_arg = nullptr;
     int nbind = 0;
     ErrBinding bind[kBindings];
+    LastError last;  // chm_err_last (err/last.cpp)
 };
 
 // The task's state, allocated if `create` (nullptr when out of memory).
@@ -54,6 +65,12 @@ int err_raise(chm_err_info_t& info);
 // off, or when a handler continued). The caller may hold the mask once
 // (nest == 1, its own IrqGuard): it is released around the handlers.
 int err_call_failed(int status, const char* call);
+// A failure that never raises (a lookup that found nothing, a call outside
+// its context): only chm_err_last records it.
+inline int record_failure(int status, const char* call) {
+    err_last_failed(call, status, false);
+    return status;
+}
 inline int raise_or_return(int status, const char* call) {
     if (status >= 0) [[likely]] return status;
     return err_call_failed(status, call);

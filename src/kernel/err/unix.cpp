@@ -4,6 +4,8 @@
 // are the libc calls themselves.
 #include <cerrno>
 #include <cstdarg>
+#include <cstdio>
+#include <cstring>
 #include <fcntl.h>
 #include <sys/ioctl.h>
 #include <unistd.h>
@@ -21,6 +23,14 @@ namespace {
 
 // The failure path: errno is what the call set, and stays so.
 void failed(const char* call, const char* detail) {
+    {
+        const int e = errno;
+        char text[CHM_ERR_LAST_MAX];
+        std::snprintf(text, sizeof text, "%s%s%s: %s", call, detail ? " " : "", detail ? detail : "",
+                      std::strerror(e));
+        err_last_set(text);  // chm_err_last
+        errno = e;
+    }
     if (!err_kernel_thread()) return;
     Tcb* cur = g_k.current;
     if (!cur || !cur->err || !cur->err->global) return;
@@ -39,7 +49,7 @@ void failed(const char* call, const char* detail) {
 
 extern "C" {
 
-int chm_open(const char* path, int flags, ...) {
+int chm_unix_open(const char* path, int flags, ...) {
     mode_t mode = 0;
     if (flags & (O_CREAT | O_TMPFILE)) {
         va_list ap;
@@ -52,31 +62,31 @@ int chm_open(const char* path, int flags, ...) {
     return fd;
 }
 
-int chm_close(int fd) {
+int chm_unix_close(int fd) {
     const int r = close(fd);
     if (r < 0) [[unlikely]] failed("close", nullptr);
     return r;
 }
 
-ssize_t chm_read(int fd, void* buf, size_t n) {
+ssize_t chm_unix_read(int fd, void* buf, size_t n) {
     const ssize_t r = read(fd, buf, n);
     if (r < 0) [[unlikely]] failed("read", nullptr);
     return r;
 }
 
-ssize_t chm_write(int fd, const void* buf, size_t n) {
+ssize_t chm_unix_write(int fd, const void* buf, size_t n) {
     const ssize_t r = write(fd, buf, n);
     if (r < 0) [[unlikely]] failed("write", nullptr);
     return r;
 }
 
-off_t chm_lseek(int fd, off_t off, int whence) {
+off_t chm_unix_lseek(int fd, off_t off, int whence) {
     const off_t r = lseek(fd, off, whence);
     if (r < 0) [[unlikely]] failed("lseek", nullptr);
     return r;
 }
 
-int chm_ioctl(int fd, unsigned long request, ...) {
+int chm_unix_ioctl(int fd, unsigned long request, ...) {
     va_list ap;
     va_start(ap, request);
     void* arg = va_arg(ap, void*);
@@ -86,10 +96,34 @@ int chm_ioctl(int fd, unsigned long request, ...) {
     return r;
 }
 
-void* chm_malloc_checked(size_t size) {
+void* chm_unix_malloc(size_t size) {
     void* p = chm_malloc(size);
     if (!p) [[unlikely]] failed("malloc", nullptr);
     return p;
 }
+
+// The names before API 1.0, kept for one release (CHANGELOG.md).
+int chm_open(const char* path, int flags, ...) {
+    mode_t mode = 0;
+    if (flags & (O_CREAT | O_TMPFILE)) {
+        va_list ap;
+        va_start(ap, flags);
+        mode = mode_t(va_arg(ap, unsigned));
+        va_end(ap);
+    }
+    return chm_unix_open(path, flags, mode);
+}
+int chm_close(int fd) { return chm_unix_close(fd); }
+ssize_t chm_read(int fd, void* buf, size_t n) { return chm_unix_read(fd, buf, n); }
+ssize_t chm_write(int fd, const void* buf, size_t n) { return chm_unix_write(fd, buf, n); }
+off_t chm_lseek(int fd, off_t off, int whence) { return chm_unix_lseek(fd, off, whence); }
+int chm_ioctl(int fd, unsigned long request, ...) {
+    va_list ap;
+    va_start(ap, request);
+    void* arg = va_arg(ap, void*);
+    va_end(ap);
+    return chm_unix_ioctl(fd, request, arg);
+}
+void* chm_malloc_checked(size_t size) { return chm_unix_malloc(size); }
 
 }  // extern "C"

@@ -8,6 +8,7 @@
 
 #include "chimera/io.h"
 #include "kernel.hpp"
+#include "err/err_internal.hpp"
 
 namespace chm::kernel {
 
@@ -127,8 +128,8 @@ using namespace chm::kernel;
 namespace port = chm::port;
 
 extern "C" int chm_io_poll(struct pollfd* fds, unsigned long nfds, int64_t timeout_ns) {
-    if (!fds && nfds) return -EFAULT;
-    if (nfds > kMaxPolled) return -EINVAL;
+    if (!fds && nfds) return record_failure(-EFAULT, "chm_io_poll");
+    if (nfds > kMaxPolled) return record_failure(-EINVAL, "chm_io_poll");
     for (unsigned long i = 0; i < nfds; ++i) fds[i].revents = 0;
     const int now_ready = poll_for(fds, nfds, 0);
     if (now_ready != 0 || timeout_ns == 0) return now_ready < 0 ? -errno : now_ready;

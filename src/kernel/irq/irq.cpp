@@ -7,6 +7,7 @@
 
 #include "chimera/irq.h"
 #include "kernel.hpp"
+#include "err/err_internal.hpp"
 
 namespace chm::kernel {
 namespace {
@@ -98,11 +99,11 @@ void deliver_now_locked() {
 extern "C" {
 
 int chm_irq_install(int vector, chm_irq_handler_t handler, void* arg) {
-    if (!valid(vector) || !handler) return -EINVAL;
-    if (!g_k.initialised) return -EPERM;
+    if (!valid(vector) || !handler) return record_failure(-EINVAL, "chm_irq_install");
+    if (!g_k.initialised) return record_failure(-EPERM, "chm_irq_install");
     IrqGuard guard;
     Vector& x = g_vec[vector];
-    if (x.handler) return -EBUSY;
+    if (x.handler) return record_failure(-EBUSY, "chm_irq_install");
     x.handler = handler;
     x.arg = arg;
     x.enabled = true;
@@ -111,24 +112,24 @@ int chm_irq_install(int vector, chm_irq_handler_t handler, void* arg) {
 }
 
 int chm_irq_remove(int vector) {
-    if (!valid(vector)) return -EINVAL;
+    if (!valid(vector)) return record_failure(-EINVAL, "chm_irq_remove");
     IrqGuard guard;
     Vector& x = g_vec[vector];
-    if (!x.handler) return -ENOENT;
+    if (!x.handler) return record_failure(-ENOENT, "chm_irq_remove");
     if (x.fd >= 0) --g_nfds;
     x = Vector{};
     return 0;
 }
 
 int chm_irq_disable(int vector) {
-    if (!valid(vector)) return -EINVAL;
+    if (!valid(vector)) return record_failure(-EINVAL, "chm_irq_disable");
     IrqGuard guard;
     g_vec[vector].enabled = false;
     return 0;
 }
 
 int chm_irq_enable(int vector) {
-    if (!valid(vector)) return -EINVAL;
+    if (!valid(vector)) return record_failure(-EINVAL, "chm_irq_enable");
     IrqGuard guard;
     g_vec[vector].enabled = true;
     if (g_held >> vector & 1) deliver_now_locked();
@@ -136,7 +137,7 @@ int chm_irq_enable(int vector) {
 }
 
 int chm_irq_raise(int vector) {
-    if (!valid(vector)) return -EINVAL;
+    if (!valid(vector)) return record_failure(-EINVAL, "chm_irq_raise");
     if (port::on_kernel_thread() && port::g_irq.nest == 0 && g_k.initialised) {
         // A task (or the kernel thread before run): deliver at once.
         IrqGuard guard;
@@ -155,11 +156,11 @@ int chm_irq_raise(int vector) {
 
 int chm_irq_attach_fd(int vector, int fd, short events) {
     if (vector < CHM_IRQ_LINE_FIRST || vector >= CHM_IRQ_VECTORS || fd < 0 || !events)
-        return -EINVAL;
+        return record_failure(-EINVAL, "chm_irq_attach_fd");
     IrqGuard guard;
     Vector& x = g_vec[vector];
-    if (x.fd >= 0) return -EBUSY;
-    if (g_nfds >= 32) return -ENOSPC;
+    if (x.fd >= 0) return record_failure(-EBUSY, "chm_irq_attach_fd");
+    if (g_nfds >= 32) return record_failure(-ENOSPC, "chm_irq_attach_fd");
     x.fd = fd;
     x.events = events;
     ++g_nfds;
@@ -168,10 +169,10 @@ int chm_irq_attach_fd(int vector, int fd, short events) {
 }
 
 int chm_irq_detach_fd(int vector) {
-    if (vector < CHM_IRQ_LINE_FIRST || vector >= CHM_IRQ_VECTORS) return -EINVAL;
+    if (vector < CHM_IRQ_LINE_FIRST || vector >= CHM_IRQ_VECTORS) return record_failure(-EINVAL, "chm_irq_detach_fd");
     IrqGuard guard;
     Vector& x = g_vec[vector];
-    if (x.fd < 0) return -ENOENT;
+    if (x.fd < 0) return record_failure(-ENOENT, "chm_irq_detach_fd");
     x.fd = -1;
     --g_nfds;
     g_held &= ~(std::uint64_t(1) << vector);

@@ -13,6 +13,7 @@
 #include "chimera/mem.h"
 #include "chimera/program.h"
 #include "kernel.hpp"
+#include "kernel/err/last.hpp"
 #include "prog/trust.hpp"
 
 namespace chm::kernel {
@@ -36,6 +37,7 @@ char g_error[768];
 
 void set_error(const char* what) {
     std::snprintf(g_error, sizeof g_error, "%s", what ? what : "");
+    if (g_error[0]) kernel::err_last_set(g_error);  // chm_err_last
 }
 
 // "PATH: cause", the file named once, and `e` returned.
@@ -46,6 +48,7 @@ int refuse(int e, const char* path, const char* fmt, ...) {
     va_start(ap, fmt);
     if (k > 0 && std::size_t(k) < sizeof g_error) std::vsnprintf(g_error + k, sizeof g_error - std::size_t(k), fmt, ap);
     va_end(ap);
+    kernel::err_last_set(g_error);  // chm_err_last
     return e;
 }
 

@@ -4,6 +4,7 @@
 #include <cerrno>
 
 #include "kernel.hpp"
+#include "err/err_internal.hpp"
 
 using namespace chm::kernel;
 namespace port = chm::port;
@@ -11,20 +12,20 @@ namespace port = chm::port;
 extern "C" {
 
 int chm_usig_handle(int signo, chm_usig_handler_t handler, void* arg) {
-    if (signo < 1 || signo > CHM_USIG_MAX) return -EINVAL;
+    if (signo < 1 || signo > CHM_USIG_MAX) return record_failure(-EINVAL, "chm_usig_handle");
     IrqGuard guard;
     Tcb* cur = g_k.current;
-    if (!cur) return -EPERM;
+    if (!cur) return record_failure(-EPERM, "chm_usig_handle");
     cur->sig_handler[signo] = handler;
     cur->sig_arg[signo] = arg;
     return 0;
 }
 
 int chm_usig_send(chm_tid_t task, int signo) {
-    if (signo < 1 || signo > CHM_USIG_MAX) return -EINVAL;
+    if (signo < 1 || signo > CHM_USIG_MAX) return record_failure(-EINVAL, "chm_usig_send");
     IrqGuard guard;
     Tcb* t = tcb_lookup(task);
-    if (!t) return -ESRCH;
+    if (!t) return record_failure(-ESRCH, "chm_usig_send");
     t->sig_pending |= 1u << signo;
     if (t->sig_blocked & (1u << signo)) return 0;
     if (t->interruptible) {

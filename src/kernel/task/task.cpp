@@ -198,7 +198,7 @@ int chm_task_spawn(chm_tid_t* out, void (*entry)(void*), void* arg, const chm_ta
     Tcb* t = slot_take_locked();
     if (!t) {
         stacks_release(lo, stack, 0);
-        return -EAGAIN;
+        return record_failure(-EAGAIN, "chm_task_spawn");
     }
     t->stack_lo = lo;
     t->stack_size = stack;
@@ -336,7 +336,7 @@ chm_tid_t chm_task_self(void) {
 }
 
 int chm_task_find(const char* name, chm_tid_t* out) {
-    if (!name || !out) return -EINVAL;
+    if (!name || !out) return record_failure(-EINVAL, "chm_task_find");
     IrqGuard guard;
     for (std::uint32_t i = 0; i < g_k.tcb_hw; ++i) {
         Tcb* t = &g_k.tcbs[i];
@@ -345,7 +345,7 @@ int chm_task_find(const char* name, chm_tid_t* out) {
             return 0;
         }
     }
-    return -ESRCH;
+    return record_failure(-ESRCH, "chm_task_find");
 }
 
 int chm_task_count(void) { return int(g_k.alive); }

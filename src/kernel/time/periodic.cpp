@@ -3,6 +3,7 @@
 #include <cerrno>
 
 #include "kernel.hpp"
+#include "err/err_internal.hpp"
 
 namespace chm::kernel {
 
@@ -47,7 +48,7 @@ extern "C" {
 
 int chm_task_pause_until(uint64_t restart_ns) {
     IrqGuard guard;
-    if (!g_k.current) return -EPERM;
+    if (!g_k.current) return record_failure(-EPERM, "chm_task_pause_until");
     if (restart_ns <= now_locked()) return 0;
     return sleep_current_locked(TaskState::Paused, restart_ns, TimerKind::Wake);
 }
@@ -57,7 +58,7 @@ int chm_task_wait_period(void) {
     Tcb* cur = g_k.current;
     if (!cur || !cur->s.period_ns) {
         port::irq_restore();
-        return -EINVAL;
+        return record_failure(-EINVAL, "chm_task_wait_period");
     }
     const std::uint64_t now = now_locked();
     charge_current_locked(now);  // statistical when cpu_accounting is 0

@@ -10,6 +10,7 @@
 #include <cstdarg>
 #include <cstring>
 
+#include "chimera/err.h"
 #include "cmdi.hpp"
 
 extern char** environ;
@@ -25,6 +26,7 @@ int fail(chm_cmdi* c, int status, const std::string& msg) noexcept {
         }
         c->error_set = true;
     }
+    chm_err_set_last("%s", msg.c_str());  // chm_err_last
     return status;
 }
 

@@ -11,6 +11,7 @@
 #include <memory>
 #include <vector>
 
+#include "chimera/err.h"
 #include "config.hpp"
 
 namespace chm::config {
@@ -182,6 +183,7 @@ int parse_into(std::string_view text, std::string name, chm_config_t** out) {
 
 int fail(int status, const char* msg) noexcept {
     std::snprintf(t_error, sizeof t_error, "%s", msg);
+    chm_err_set_last("%s", t_error);  // chm_err_last
     return status;
 }
 
@@ -192,6 +194,7 @@ int failf(int status, const char* fmt, ...) noexcept {
     va_start(ap, fmt);
     std::vsnprintf(t_error, sizeof t_error, fmt, ap);
     va_end(ap);
+    chm_err_set_last("%s", t_error);  // chm_err_last
     return status;
 }
 

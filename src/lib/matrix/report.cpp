@@ -48,6 +48,7 @@ int fail(const char* call, int code, const char* fmt, ...) {
     va_start(ap, fmt);
     std::vsnprintf(t_last + k, sizeof t_last - std::size_t(k), fmt, ap);
     va_end(ap);
+    kernel::err_last_set(t_last);  // chm_err_last
     // Host threads, tasks without global handling, and the interrupt mask
     // (a handler must not run inside the kernel): a status only.
     if (!chm_err_global_get() || port::irq_masked()) return status;
