@@ -182,8 +182,8 @@ int chm_cmdi_history_file(chm_cmdi_t* c, const char* path);
  * -ENOENT no history file was set; other -errno of writing it. */
 int chm_cmdi_history_save(chm_cmdi_t* c);
 
-/* 1 when the library was built with libedit (line editing, tab
- * completion), 0 when interactive sessions read plain lines. */
+/* Returns 1 when the library was built with libedit (line editing, tab
+ * completion), 0 when interactive sessions read plain lines. Never fails. */
 int chm_cmdi_has_line_editing(void);
 
 /* Read lines from stdin and run them until quit or end of input,

@@ -173,7 +173,8 @@ int chm_config_require_choice(const chm_config_t* cfg, const char* key,
 int chm_config_get_doubles(const chm_config_t* cfg, const char* key, double lo, double hi,
                            size_t min_n, size_t max_n, double* out, size_t* n);
 
-/* The same for integers in [lo, hi] (floats refused). */
+/* The same for integers in [lo, hi] (floats refused). Errors: as
+ * chm_config_get_doubles. */
 int chm_config_get_int64s(const chm_config_t* cfg, const char* key, int64_t lo, int64_t hi,
                           size_t min_n, size_t max_n, int64_t* out, size_t* n);
 

@@ -159,7 +159,8 @@ int chm_dev_task_abort(chm_tid_t task);
  * how many were stopped. */
 int chm_dev_safe_stop_all(void);
 
-/* Number of open descriptors (tests: nothing leaked). */
+/* Returns the number of open descriptors (tests: nothing leaked). Never
+ * fails. */
 int chm_dev_open_count(void);
 
 /* The message of the last failing device call on this thread ("" if none):

@@ -147,7 +147,8 @@ typedef chm_err_action_t (*chm_err_handler_t)(const chm_err_info_t* info, void* 
  * returned (there is no task to abort). Errors: -EINVAL unknown module or
  * code <= 0 (nothing raised). */
 int chm_err_invoke(int module, int code);
-/* The same, recording where. CHM_ERR_INVOKE uses it in debug builds. */
+/* The same, recording where. CHM_ERR_INVOKE uses it in debug builds.
+ * Errors: as chm_err_invoke. */
 int chm_err_invoke_at(int module, int code, const char* file, int line);
 #ifdef NDEBUG
 #define CHM_ERR_INVOKE(module, code) chm_err_invoke_at((module), (code), NULL, 0)
@@ -232,7 +233,7 @@ void chm_err_jump(chm_err_mark_t* m, int code)
  * when off. Returns the previous setting. Errors: -EPERM not in a task;
  * -ENOMEM. */
 int chm_err_global(int on);
-/* The calling task's setting (0 outside a task). */
+/* Returns the calling task's setting (0 outside a task). Never fails. */
 int chm_err_global_get(void);
 
 /* The UNIX calls, wrapped: exactly the libc call when global handling is
@@ -251,7 +252,8 @@ int chm_unix_ioctl(int fd, unsigned long request, ...);
 void* chm_unix_malloc(size_t size);
 
 /* The names before API 1.0 (chm_open beside chm_dev_open read as the same
- * subsystem): the same calls, kept for one release (CHANGELOG.md). */
+ * subsystem): the same calls, kept for one release (CHANGELOG.md). Errors:
+ * as chm_unix_open and the others. */
 int chm_open(const char* path, int flags, ...);
 int chm_close(int fd);
 ssize_t chm_read(int fd, void* buf, size_t n);

@@ -236,8 +236,8 @@ int chm_mat_inverse(const chm_mat_t* a, const chm_mat_t* out, double* work, size
  * subsystem: use it; this call is kept for one release (CHANGELOG.md). */
 const char* chm_mat_last_error(void);
 
-/* The CHM_EMAT_* code of the last failing matrix call on this thread (0 if
- * none). */
+/* Returns the CHM_EMAT_* code of the last failing matrix call on this
+ * thread (0 if none). Never fails. */
 int chm_mat_last_code(void);
 
 /* The id of error module "matrix" (registered on first use: its codes are

@@ -127,8 +127,9 @@ extern const chm_sched_ops_t chm_sched_edf_ops;
 extern const chm_sched_ops_t chm_sched_mlf_ops;
 extern const chm_sched_ops_t chm_sched_fixed_ops;
 
-/* Number of times the user scheduler failed and the kernel fell back to MUF
- * (0 or 1), and the reason of the failure as text ("" when none). */
+/* Returns the number of times the user scheduler failed and the kernel fell
+ * back to MUF (0 or 1); the reason of the failure as text ("" when none).
+ * Never fail. */
 int chm_sched_fallbacks(void);
 const char* chm_sched_fallback_reason(void);
 

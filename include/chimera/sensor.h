@@ -118,10 +118,14 @@ void chm_actuator_limits_init(chm_actuator_limits_t* lim, const chm_sio_info_t* 
  * error. */
 int chm_actuator_open(const char* name, const chm_actuator_limits_t* lim);
 
-/* Describe the actuator's vector (range = the device's hardware range). */
+/* Describe the actuator's vector (range = the device's hardware range).
+ * Errors: CHM_EDEV_BADF not an open descriptor; CHM_ESIO_NOTSUP not an
+ * actuator; CHM_ESIO_INVAL NULL info; the driver's error. */
 int chm_actuator_info(int ad, chm_sio_info_t* info);
 
-/* Replace the limits (same checks as at open). */
+/* Replace the limits (same checks as at open); the old ones stay on error.
+ * Errors: CHM_EDEV_BADF; CHM_ESIO_NOTSUP not opened with
+ * chm_actuator_open; CHM_ESIO_INVAL as chm_actuator_open's limits. */
 int chm_actuator_set_limits(int ad, const chm_actuator_limits_t* lim);
 
 /* Command the actuator with v[0..n-1] (n must be the device's length).
@@ -136,7 +140,9 @@ int chm_actuator_write(int ad, const double* v, uint32_t n);
  * until chm_actuator_resume. Errors: CHM_EDEV_BADF, CHM_ESIO_NOTSUP. */
 int chm_actuator_stop(int ad);
 
-/* Leave a safe stop; the output is 0 until the next command. */
+/* Leave a safe stop; the output is 0 until the next command. Errors:
+ * CHM_EDEV_BADF; CHM_ESIO_NOTSUP not opened with chm_actuator_open; the
+ * driver's error (the stop stays latched). */
 int chm_actuator_resume(int ad);
 
 /* Counters and the last applied vector. Errors: CHM_EDEV_BADF,

@@ -93,7 +93,10 @@ typedef struct {
  * (chimera/rtpu.h). Nothing is taken on error. */
 int chm_servo_take(uint32_t rtpus);
 
-/* Give control of those RTPUs back (their modules run on). */
+/* Give control of those RTPUs back (their modules run on). Every RTPU in
+ * the mask is asked, even after one fails. Errors: the first RTPU's
+ * failure: -EPERM the caller did not hold it; -EHOSTDOWN not running;
+ * express-mail errors (chimera/rtpu.h). */
 int chm_servo_release(uint32_t rtpus);
 
 /* Load the module `s->path` on RTPU `s->rtpu` as instance `s->name`, check
@@ -129,7 +132,8 @@ int chm_servo_find(int rtpu, const char* name, chm_servo_module_t* out);
 int chm_servo_switch(const chm_servo_module_t* off, size_t n_off, const chm_servo_module_t* on, size_t n_on,
                      unsigned flags, uint64_t* at_ns);
 
-/* One module on, or off: chm_servo_switch of one. */
+/* One module on, or off: chm_servo_switch of one. Errors: as
+ * chm_servo_switch. */
 int chm_servo_on(chm_servo_module_t m);
 int chm_servo_off(chm_servo_module_t m);
 

@@ -171,7 +171,8 @@ int chm_svar_set_claim_at(chm_svar_set_t* set, const char* const* displace, size
 /* 1 when another set has taken one of this set's outputs with a hand-over
  * instant at or before `release_ns` (the writer must stop writing from the
  * cycle released then), else 0 (also for a NULL set, or one that holds no
- * claim). A few atomic loads per output: cheap enough for every cycle. */
+ * claim). A few atomic loads per output: cheap enough for every cycle.
+ * Never fails. */
 int chm_svar_set_displaced(const chm_svar_set_t* set, uint64_t release_ns);
 
 /* Give up the set's claims (those still naming it); the set stays open
