@@ -1,5 +1,5 @@
 // Every row of the report, in report order: Chimera's own rows first (the
-// Chimera II paper's Table 1, then the PERF.md target rows, then the rows the
+// Chimera II paper's Table 1, then the performance-target rows, then the rows the
 // port provides today), then the peers, each rt-tests row beside the suite's
 // matching peer. A Chimera row names the peer a user would otherwise pick;
 // its measurement must use the same pinning as that peer (stated in both
@@ -74,7 +74,7 @@ constexpr RowInfo kRows[] = {
     {"shm_write_overhead", "ns", "peer_array_write", 0, {Target::kRatioAtMost, 0.05},
      "extra ns per 8-byte write through attached global shared memory"},
 
-    // ---- PERF.md targets (issue 6 item 7)
+    // ---- performance targets (bench/README.md)
     {"yield_switch", "ns", "peer_fiber_switch", kNull, ratio_le(3),
      "yield to an equal-priority task through the scheduler"},
     {"sem_v_wake_switch", "ns", "peer_fiber_switch", kNull, ratio_le(5),

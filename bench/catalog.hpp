@@ -1,5 +1,5 @@
 // The catalog: every row the report knows, measured or not yet, with its
-// unit, its peer, the Chimera II paper's figure and the PERF.md target.
+// unit, its peer, the Chimera II paper's figure and its performance target.
 #pragma once
 
 #include <span>

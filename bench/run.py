@@ -157,7 +157,7 @@ def markdown(rows, rest, info, commands, quick, elapsed):
     other = [u for u in rest if u["status"] != "not yet measured"]
     if pending:
         out.extend(["## Not yet measured", "",
-                    "Catalogue rows (the Chimera II Table 1, the PERF.md targets, the "
+                    "Catalogue rows (the Chimera II Table 1, the performance targets, the "
                     "predictability rows) whose subsystem is not built yet. They get a figure "
                     "when a measurement for them is added to `bench/` — never before.", "",
                     "| row | what | peer | target | paper (1991) |",

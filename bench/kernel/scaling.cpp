@@ -1,6 +1,6 @@
 // Scheduler cost against the number of tasks (10 to 10,000).
 //
-// sched_ops_10k_over_10 (the PERF.md target): the scheduler at work. N
+// sched_ops_10k_over_10 (a performance target): the scheduler at work. N
 // periodic tasks with empty cycles, under MUF and under EDF (default config
 // otherwise: 1 ms quantum, cpu_accounting 1), released in groups of 10 on
 // one timer expiry every 0.5 ms: N = 10 is one group with a 0.5 ms period,

@@ -1,4 +1,4 @@
-// Table 1, local semaphores, and the PERF.md semaphore targets. Every row
+// Table 1, local semaphores, and the semaphore performance targets. Every row
 // times its own operation:
 //  * uncontended P, V and P+V: batches on CLOCK_MONOTONIC in one task;
 //  * P that blocks, V that wakes (with and without the switch), and the

@@ -1,5 +1,5 @@
 // Task-to-task switches through the scheduler: yield to an equal task (the
-// PERF.md target) and the Table 1 context switch with live FPU state. Two
+// performance target) and the Table 1 context switch with live FPU state. Two
 // equal-priority tasks yield to each other; one yield of the timing task is
 // two switches (to the partner and back), so the figure is the round / 2.
 #include <cfenv>

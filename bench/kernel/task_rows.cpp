@@ -1,5 +1,5 @@
 // Table 1, task management: create, destroy, change static priority, and
-// the PERF.md spawn target: a task spawned, run and ended (task_spawn_run_exit,
+// the spawn performance target: a task spawned, run and ended (task_spawn_run_exit,
 // beside pthread create+join and a Boost.Context fiber created, run and
 // destroyed), with spawn+destroy of a task that never runs kept apart. Each row is its own timed loop, run by a
 // driver task of priority 9 on a FIXED-priority kernel; the tasks it spawns

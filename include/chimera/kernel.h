@@ -20,7 +20,7 @@ extern "C" {
 #define CHM_FOREVER UINT64_MAX /* wait as long as it takes */
 #define CHM_NO_WAIT 0          /* do not wait: succeed now or fail */
 
-/* Built-in scheduling policies (DESIGN.md, "The policies, precisely"). */
+/* Built-in scheduling policies (sched.h defines each precisely; docs/architecture.md, "One RTPU"). */
 enum chm_sched_policy {
     CHM_SCHED_MUF = 0, /* maximum urgency first: criticality, laxity, priority (default) */
     CHM_SCHED_RM = 1,  /* rate monotonic: shorter period first, then priority */
