@@ -54,9 +54,12 @@ bool fault_no_room_from_signal(void* ucontext, std::uintptr_t addr);
 // Rewrite `ucontext` so that, after the handler returns, the interrupted
 // thread calls `fn()` (which never returns) with the stack pointer at
 // `sp` (aligned by the port as for a call), or, with sp == 0, on the
-// interrupted stack below its red zone. The processor's flags and FP
-// control state are reset to the ABI's defaults at a call. Per target, in
-// <arch>/fault.cpp.
+// interrupted stack below its red zone. Whatever the ABI requires at a
+// call is restored: x86-64 clears DF and resets MXCSR and the x87 control
+// word (an unmasked FP trap must not fire again in the entry); the aarch64
+// and m68k ABIs require nothing there, and those ports leave the FP control
+// registers as the faulting code had them (Chimera never unmasks FP traps
+// on them). Per target, in <arch>/fault.cpp.
 void redirect_to_call_from_signal(void* ucontext, void (*fn)(), std::uintptr_t sp);
 
 }  // namespace chm::port
