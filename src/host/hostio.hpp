@@ -21,7 +21,7 @@
 namespace chm::host {
 
 enum Op : std::uint32_t {
-    kOpen = 1,   // text: path; a = flags (CHM_XFS_*), b = mode -> status: handle, reply: uint32 kOpen*
+    kOpen = 1,   // text: path; a = flags (CHM_XFS_*), b = mode -> status: handle, reply: OpenReply
     kClose,      // fd
     kRead,       // fd, b = bytes wanted, a = offset or -1 (current position), bulk
     kWrite,      // fd, text or bulk: the data, a = offset or -1
@@ -38,8 +38,20 @@ enum Op : std::uint32_t {
     kOpEnd
 };
 
-// What an open reply says of the file (a uint32 of these bits).
+// What an open reply says of the file (OpenReply::what, bits).
 inline constexpr std::uint32_t kOpenRegular = 1;  // a regular file: reads may be streamed ahead
+// Readable, on a local file system: the client may read what the page
+// cache holds itself, through its own descriptor of the file (the server's
+// descriptor `fd` reopened by /proc; the file is the one with dev and ino).
+inline constexpr std::uint32_t kOpenDirect = 2;
+
+struct OpenReply {
+    std::uint32_t what;     // kOpen* bits
+    std::int32_t fd;        // the server's descriptor (kOpenDirect), else -1
+    std::uint64_t dev;
+    std::uint64_t ino;
+};
+static_assert(sizeof(OpenReply) == 24);
 
 struct HostRequest {
     std::uint32_t op;

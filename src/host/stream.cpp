@@ -26,6 +26,7 @@
 #include "chimera/task.h"
 #include "chimera/xfs.h"
 #include "host/client.hpp"
+#include "host/direct.hpp"
 #include "ipc/backplane/backplane.hpp"
 
 namespace chm::host::stream {
@@ -216,6 +217,21 @@ std::int64_t read(int fd, char* buf, std::size_t n, bool* used) {
     std::size_t done = 0;
     std::int64_t err = 0;
     while (done < n) {
+        if (!s->n && !s->eof && direct::has(fd)) {
+            // Nothing in flight: what the page cache holds is read here
+            // (direct.cpp), the rest read ahead by the server.
+            const std::int64_t d = direct::read(fd, buf + done, n - done, s->pos);
+            if (d == 0) {
+                s->eof = true;  // at the end of the file
+                break;
+            }
+            if (d > 0) {
+                done += std::size_t(d);
+                s->pos += std::uint64_t(d);
+                s->ahead = s->pos;
+                continue;  // a short one: the next says whether the rest is cached
+            }
+        }
         fill(*s, fd);
         if (!s->n) break;  // end of file reached, or no buffer: the caller reads on
         const std::int64_t got = await_head(*s, fd);

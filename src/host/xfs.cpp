@@ -8,6 +8,7 @@
 
 #include "chimera/xfs.h"
 #include "host/client.hpp"
+#include "host/direct.hpp"
 #include "host/stream.hpp"
 
 using namespace chm::host;
@@ -108,9 +109,14 @@ int chm_xfs_open(const char* path, int flags, unsigned mode) {
     clear_error();
     if (flags & ~kFlagsKnown || (flags & 3) == 3)
         return set_error("open %s: unknown flags 0x%x", path ? path : "(null)", unsigned(flags)), -EINVAL;
-    std::uint32_t what = 0, n = 0;
+    OpenReply what{};
+    std::uint32_t n = 0;
     const int fd = path_request(kOpen, path, &what, sizeof what, &n, std::uint64_t(flags), mode & 07777);
-    if (fd >= 0) stream::opened(fd, n == sizeof what && (what & kOpenRegular));
+    if (fd >= 0) {
+        if (n != sizeof what) what = OpenReply{0, -1, 0, 0};
+        stream::opened(fd, what.what & kOpenRegular);
+        direct::opened(fd, what);
+    }
     return fd;
 }
 
@@ -119,6 +125,7 @@ int chm_xfs_close(int fd) {
     char what[48];
     std::snprintf(what, sizeof what, "close of handle %d", fd);
     stream::closed(fd);
+    direct::closed(fd);
     return request(make(kClose, fd), nullptr, 0, nullptr, 0, nullptr, what);
 }
 
@@ -133,8 +140,16 @@ int64_t chm_xfs_read(int fd, void* buf, size_t n) {
 }
 
 int64_t chm_xfs_pread(int fd, void* buf, size_t n, int64_t offset) {
+    clear_error();
     if (offset < 0) return set_error("pread of handle %d: negative offset", fd), -EINVAL;
-    return transfer(fd, static_cast<char*>(buf), n, offset, read_part);
+    if (n && !buf) return set_error("handle %d: NULL buffer", fd), -EFAULT;
+    // What the page cache holds, read here; the rest through the server.
+    const std::int64_t d = n ? direct::read(fd, static_cast<char*>(buf), n, std::uint64_t(offset)) : 0;
+    if (d == std::int64_t(n)) return d;
+    const std::size_t done = d > 0 ? std::size_t(d) : 0;
+    const std::int64_t r = transfer(fd, static_cast<char*>(buf) + done, n - done, offset + std::int64_t(done), read_part);
+    if (r < 0) return done ? std::int64_t(done) : r;
+    return std::int64_t(done) + r;
 }
 
 int64_t chm_xfs_write(int fd, const void* buf, size_t n) {

@@ -9,9 +9,11 @@
 
 #include <sys/ioctl.h>
 #include <sys/stat.h>
+#include <sys/vfs.h>
 
 #include "chimera/host.h"
 #include "chimera/xfs.h"
+#include "host/direct.hpp"
 #include "../rtpu/rtpu_fixture.hpp"
 
 namespace chm::test {
@@ -23,11 +25,17 @@ protected:
     static constexpr std::uint32_t kCommon = 2 * 1024 * 1024;
     void SetUp() override {
         RtpuTest::SetUp();
-        root_ = dir_ + "/root";
+        // The root and what lies outside it on a disk file system, not in
+        // the backplane's tmpfs directory: reads of page-cached files take
+        // the direct way there (preadv2 RWF_NOWAIT; tmpfs refuses it).
+        char tmpl[] = "/var/tmp/chm-host-XXXXXX";
+        ASSERT_NE(mkdtemp(tmpl), nullptr);
+        outside_ = tmpl;
+        root_ = outside_ + "/root";
         ASSERT_EQ(mkdir(root_.c_str(), 0700), 0);
         ASSERT_EQ(mkdir((root_ + "/sub").c_str(), 0700), 0);
         write(root_ + "/hello.txt", "hello, host\n");
-        write(dir_ + "/secret.txt", "outside the root\n");
+        write(outside_ + "/secret.txt", "outside the root\n");
         ASSERT_EQ(symlink("../secret.txt", (root_ + "/escape").c_str()), 0);
         ASSERT_EQ(symlink("/etc/passwd", (root_ + "/abs").c_str()), 0);
         ASSERT_EQ(symlink("hello.txt", (root_ + "/inside").c_str()), 0);
@@ -54,7 +62,12 @@ protected:
     }
     std::string probe_out() { return dir_ + "/probe.out"; }
 
-    std::string root_;
+    void TearDown() override {
+        RtpuTest::TearDown();
+        if (!outside_.empty()) std::system(("rm -rf '" + outside_ + "'").c_str());
+    }
+
+    std::string outside_, root_;
     pid_t server_ = -1, rtpu1_ = -1;
 };
 
@@ -182,12 +195,24 @@ TEST_F(HostTest, RandomCallsAgreeWithTheLocalFile) {
             struct stat ls;
             ASSERT_EQ(::fstat(l, &ls), 0);
             ASSERT_EQ(st.size, std::uint64_t(ls.st_size));
-        } else {  // where each says it is
+        } else {  // where each says it is; now and then the file leaves the page cache
             ASSERT_EQ(chm_xfs_lseek(h, 0, SEEK_CUR), std::int64_t(::lseek(l, 0, SEEK_CUR)));
+            if (rnd() % 3 == 0) {
+                ::fdatasync(l);
+                ::posix_fadvise(l, 0, 0, POSIX_FADV_DONTNEED);
+            }
         }
     }
     EXPECT_EQ(chm_xfs_close(h), 0);
     ::close(l);
+    // Both ways were taken: reads of cached pages by this process, and of
+    // evicted ones through the host server (a file on a local file system).
+    const host::direct::Counts c = host::direct::counts();
+    struct statfs fs {};
+    if (::statfs(root_.c_str(), &fs) == 0 && (fs.f_type == 0xEF53 || fs.f_type == 0x58465342)) {
+        EXPECT_GT(c.bytes, 0u) << "no read was served from the page cache directly";
+        EXPECT_GT(c.misses, 0u) << "no read of an evicted page went through the host server";
+    }
 }
 
 TEST_F(HostTest, IoctlPassesItsArgumentBothWays) {
@@ -222,7 +247,7 @@ TEST_F(HostTest, EveryEscapeIsRefused) {
     ASSERT_EQ(symlink("../made.txt", (root_ + "/maker").c_str()), 0);
     EXPECT_EQ(chm_xfs_open("maker", CHM_XFS_WRONLY | CHM_XFS_CREAT, 0600), -EXDEV);
     struct stat st;
-    EXPECT_NE(stat((dir_ + "/made.txt").c_str(), &st), 0);
+    EXPECT_NE(stat((outside_ + "/made.txt").c_str(), &st), 0);
     EXPECT_EQ(chm_host_chdir(".."), -EXDEV);
     // ".." that stays inside is fine.
     const int fd = chm_xfs_open("sub/../hello.txt", CHM_XFS_RDONLY, 0);

@@ -11,6 +11,7 @@
 
 #include <fcntl.h>
 #include <linux/openat2.h>
+#include <sys/vfs.h>
 #include <sys/syscall.h>
 #include <unistd.h>
 
@@ -116,6 +117,22 @@ int fs_relative(int fd, std::string* out) {
     if (!beneath(real)) return -EXDEV;
     *out = real.size() > g_root.size() ? real.substr(g_root.size() + (g_root == "/" ? 0 : 1)) : "";
     return 0;
+}
+
+bool fs_local(int fd) {
+    struct statfs f {};
+    if (::fstatfs(fd, &f) != 0) return false;
+    switch (static_cast<unsigned long>(f.f_type)) {
+    case 0xEF53:      // ext2, ext3, ext4
+    case 0x58465342:  // xfs
+    case 0x9123683E:  // btrfs
+    case 0xF2F52010:  // f2fs
+    case 0x01021994:  // tmpfs
+    case 0x794C7630:  // overlayfs
+        return true;
+    default:
+        return false;
+    }
 }
 
 }  // namespace chm::host::server

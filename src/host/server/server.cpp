@@ -166,9 +166,15 @@ int serve(const HostRequest& h, const char* body, std::uint32_t body_len, std::u
         }
         struct stat st;
         *free_slot = Handle{fd, owner, ::fstat(fd, &st) == 0 && S_ISREG(st.st_mode)};
-        const std::uint32_t what = free_slot->regular ? kOpenRegular : 0;
-        std::memcpy(rep, &what, sizeof what);
-        *n = sizeof what;
+        OpenReply r{free_slot->regular ? kOpenRegular : 0, -1, 0, 0};
+        if (free_slot->regular && (oflags & O_ACCMODE) != O_WRONLY && fs_local(fd)) {
+            r.what |= kOpenDirect;
+            r.fd = fd;
+            r.dev = st.st_dev;
+            r.ino = st.st_ino;
+        }
+        std::memcpy(rep, &r, sizeof r);
+        *n = sizeof r;
         return int(free_slot - g->handles);
     }
     case kClose: {

@@ -53,6 +53,10 @@ int fs_open(const std::string& rel, int oflags, unsigned mode, const char** why)
 // The path of an open fd beneath the root ("" = the root), or -EXDEV.
 int fs_relative(int fd, std::string* out);
 const std::string& fs_root();
+// Whether fd's file lies on a local disk or memory file system (ext2/3/4,
+// xfs, btrfs, f2fs, tmpfs, overlay): a read of what its page cache holds
+// never waits on a network, so a client may do it itself (kOpenDirect).
+bool fs_local(int fd);
 
 // Join a client's working directory and a path; -EXDEV for an absolute path.
 int fs_join(const Client& c, const char* path, std::string* out, const char** why);

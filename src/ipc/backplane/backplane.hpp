@@ -209,6 +209,11 @@ enum class MemberTarget { KernelThread, Process };
 int signal_member(std::uint32_t slot, MemberTarget target, int sig, std::uint32_t status = 0);
 // Drop every cached verdict (attach, leave, a forked child).
 void member_forget();
+// Open, read-only, the file that descriptor `remote_fd` of the member in
+// `slot` has open (through /proc/<pid>/fd: a new open file description),
+// after the same checks as a signal. 0 and *out, -EPERM (refused and
+// reported), -ESRCH (gone), -ENOTCONN, -EINVAL, or the open's -errno.
+int open_member_file(std::uint32_t slot, int remote_fd, int* out);
 
 // --------------------------------------------------------- the robust lock
 

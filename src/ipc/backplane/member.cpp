@@ -301,6 +301,36 @@ int signal_member(std::uint32_t slot, MemberTarget target, int sig, std::uint32_
                                                 : signal_process(*a, a->fd, slot, status, sig);
 }
 
+int open_member_file(std::uint32_t slot, int remote_fd, int* out) {
+    *out = -1;
+    const Attachment* a = current();
+    if (!a) return -ENOTCONN;
+    if (slot >= a->slots() || remote_fd < 0) return -EINVAL;
+    const RtpuEntry* e = a->rtpu(slot);
+    const std::uint32_t status = e->status.load(std::memory_order_acquire);
+    const int pid = int(e->pid.load(std::memory_order_acquire));
+    char why[256];
+    // A member in this very process (tests run the host server in a
+    // thread) needs no check: the descriptor is ours.
+    if (pid != ::getpid()) {
+        if (int r = verify(*a, a->fd, slot, pid, 0, why, sizeof why)) {
+            report(why);
+            return r;
+        }
+    }
+    char rest[32];
+    std::snprintf(rest, sizeof rest, "fd/%d", remote_fd);
+    const int fd = open_proc(pid, rest);
+    if (fd < 0) return -errno;
+    // Still the member checked above (its pid not reused meanwhile).
+    if (proc_start_time(pid) != e->pid_start || e->status.load(std::memory_order_acquire) != status) {
+        ::close(fd);
+        return -ESRCH;
+    }
+    *out = fd;
+    return 0;
+}
+
 void member_forget() {
     for (Verdict& c : g_cache) {
         c.seq.store(0, R);
