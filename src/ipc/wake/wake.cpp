@@ -163,13 +163,13 @@ void grant_word(std::uint32_t* word, std::uint32_t value, std::uint32_t slot, Wa
 void wake_granted(std::uint32_t* word, std::uint32_t slot, WaiterId who) {
     bp::Attachment* a = bp::current();
     bp::RtpuEntry* e = a && slot < a->slots() ? a->rtpu(slot) : nullptr;
+    // Our own RTPU, from one of its tasks: scan its parked tasks. Bound or
+    // not (a virtual-clock kernel has no thread for peers to signal, so it
+    // is not bound, but its own tasks wake each other).
+    if (who.as_task() && e && slot == a->slot && port::on_kernel_thread()) return kernel::remote_scan();
     if (who.as_task() && e && e->tid.load() != 0) {
-        if (slot == a->slot && port::on_kernel_thread()) {
-            kernel::remote_scan();  // our own RTPU, from one of its tasks
-        } else {
-            port::doorbell_ring(doorbell_of(e), 1u << kernel::kGrantVector, interrupt_slot, slot_ctx(slot),
-                                port::RingFor{who.urgency, who.task});
-        }
+        port::doorbell_ring(doorbell_of(e), 1u << kernel::kGrantVector, interrupt_slot, slot_ctx(slot),
+                            port::RingFor{who.urgency, who.task});
         return;
     }
     syscall(SYS_futex, word, FUTEX_WAKE, 1, nullptr, nullptr, 0);  // a thread on the futex
