@@ -100,8 +100,8 @@ WaitLimit wait_until(std::uint64_t deadline_ns) {
 
 std::uint64_t WaitLimit::deadline() const {
     switch (kind) {
-    case kForever:
-    case kNoWait: return CHM_FOREVER;
+    case kForever: return CHM_FOREVER;
+    case kNoWait: return 0;  // already past
     case kFor: {
         const std::uint64_t now = wait_now();
         return now + ns < now ? CHM_FOREVER : now + ns;

@@ -47,7 +47,8 @@ struct WaitLimit {
     enum Kind : std::uint8_t { kForever, kNoWait, kFor, kUntil };
     Kind kind = kForever;
     std::uint64_t ns = 0;  // kFor: relative timeout; kUntil: a chm_time_now() deadline
-    // The deadline on wait_now()'s clock; UINT64_MAX: none. Not for kNoWait.
+    // The deadline on wait_now()'s clock; UINT64_MAX: none; kNoWait: 0, past
+    // (callers fail with -EAGAIN before they get here).
     std::uint64_t deadline() const;
 };
 // CHM_NO_WAIT (0) gives kNoWait, CHM_FOREVER kForever.

@@ -131,7 +131,7 @@ extern "C" int chm_io_poll(struct pollfd* fds, unsigned long nfds, uint64_t time
     if (nfds > kMaxPolled) return -EINVAL;
     for (unsigned long i = 0; i < nfds; ++i) fds[i].revents = 0;
     const int now_ready = poll_for(fds, nfds, 0);
-    if (now_ready != 0 || timeout_ns == 0) return now_ready < 0 ? -errno : now_ready;
+    if (now_ready != 0 || timeout_ns == CHM_NO_WAIT) return now_ready < 0 ? -errno : now_ready;
     port::irq_disable();
     Tcb* cur = g_k.current;
     if (!cur || cur->lock_nest || !port::on_kernel_thread()) {
