@@ -147,7 +147,7 @@ int main(int argc, char **argv) {
         memset(&sec, 0, sizeof sec);
         loop_stat_t last = prev;
         for (uint64_t now; (now = now_ns()) < end;) {
-            r = chm_msgq_receive_timed(q, &st, sizeof st, NULL, (int64_t)(end - now));
+            r = chm_msgq_receive_timed(q, &st, sizeof st, NULL, end - now);
             if (r == -ETIMEDOUT || r == -EINTR) continue;
             if (r == -EIDRM) {
                 printf("chimera-loop-monitor: %s was destroyed: the sensor stopped\n", LOOP_STATS);

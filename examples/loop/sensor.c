@@ -34,10 +34,10 @@ static enum chm_deadline_action on_miss(const chm_deadline_info_t *info, void *a
  * sample whose wait already ran out) are dropped. 1: *out holds it. */
 static int await_reply(uint64_t seq, uint64_t until_ns, loop_reply_t *out) {
     for (;;) {
-        const uint64_t now = chm_time_now();
-        if (now >= until_ns) return 0;
         chm_msgq_msg_info_t info;
-        const int n = chm_msgq_receive_timed(g_reply, out, sizeof *out, &info, (int64_t)(until_ns - now));
+        /* An absolute deadline: the drops and retries below all count
+         * against the same instant; one already past does not wait. */
+        const int n = chm_msgq_receive_until(g_reply, out, sizeof *out, &info, until_ns);
         if (n == (int)sizeof *out && out->seq == seq) {
             g_controller = info.sender;
             return 1;

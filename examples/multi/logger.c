@@ -39,7 +39,7 @@ static void figures(double *p50_us, double *p99_us, double *max_us) {
 static void log_task(void *arg) {
     (void)arg;
     for (;;) {
-        const int r = chm_rsem_p_timed(g_tick, 1000 * (int64_t)MS);
+        const int r = chm_rsem_p_timed(g_tick, 1000 * MS);
         if (r == -ETIMEDOUT) {
             printf("logger: no tick from the servo for 1 s\n");
             continue;

@@ -25,6 +25,8 @@
 
 #include <stdint.h>
 
+#include "chimera/kernel.h" /* CHM_FOREVER, CHM_NO_WAIT */
+
 #ifdef __cplusplus
 extern "C" {
 #endif
@@ -32,12 +34,16 @@ extern "C" {
 struct pollfd;
 
 /* poll(2) that parks only the calling task: wait until one of `fds` is
- * ready, or `timeout_ns` passes (-1 = no limit, 0 = just look). Returns the
- * number of ready descriptors (revents filled in), 0 on timeout.
+ * ready, or `timeout_ns` passes (relative, chimera/kernel.h "Timeouts":
+ * CHM_NO_WAIT just looks, CHM_FOREVER no limit). Compatibility: the
+ * parameter was int64_t with -1 for no limit; a -1 passed now converts to
+ * UINT64_MAX, CHM_FOREVER, and still means no limit. Returns the number
+ * of ready descriptors (revents filled in), 0 when none became ready in
+ * time (CHM_NO_WAIT included: poll's convention, not an error).
  * Task context; elsewhere it is an ordinary poll(2).
  * Errors: -EINTR a user signal interrupted the wait; -EINVAL more than 1024
  * descriptors; -EFAULT fds NULL with nfds > 0; poll's own errors negated. */
-int chm_io_poll(struct pollfd* fds, unsigned long nfds, int64_t timeout_ns);
+int chm_io_poll(struct pollfd* fds, unsigned long nfds, uint64_t timeout_ns);
 
 #ifdef __cplusplus
 }

@@ -15,8 +15,12 @@ extern "C" {
 
 #define CHM_OK 0
 
-/* Timeouts, in every blocking call that takes one: relative nanoseconds,
- * with these two named values. */
+/* Timeouts, in every blocking call that takes one (docs/architecture.md,
+ * "Timeouts"): uint64_t relative nanoseconds with these two named values,
+ * or, in the _until calls, an absolute chm_time_now() deadline (CHM_FOREVER:
+ * none; one already past: do not wait). -EAGAIN: CHM_NO_WAIT could not
+ * succeed at once; -ETIMEDOUT: a positive timeout ran out, or the deadline
+ * came. */
 #define CHM_FOREVER UINT64_MAX /* wait as long as it takes */
 #define CHM_NO_WAIT 0          /* do not wait: succeed now or fail */
 

@@ -43,6 +43,8 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "chimera/kernel.h" /* CHM_FOREVER, CHM_NO_WAIT */
+
 #ifdef __cplusplus
 extern "C" {
 #endif
@@ -134,12 +136,25 @@ int chm_msgq_close(chm_msgq_t* q);
  * queue; -ETIMEDOUT; -EDEADLK its lock was held past 5 s by a live peer. */
 int chm_msgq_destroy(const char* name);
 
+/* Timeouts (chimera/kernel.h): `timeout_ns` of the _timed calls is
+ * relative; CHM_NO_WAIT does not wait (as the try_ calls), CHM_FOREVER
+ * waits as long as it takes. Compatibility: it was int64_t with any
+ * negative value meaning no limit; a -1 passed now converts to
+ * UINT64_MAX, CHM_FOREVER, and still means no limit (other negative values
+ * become huge timeouts). `deadline_ns` of the _until calls is an absolute
+ * chm_time_now() value, for a loop that waits against fixed instants: a
+ * task waits on its RTPU's kernel clock (exact on the virtual clock), a
+ * host thread on CLOCK_MONOTONIC (chm_time_now()'s clock there). A
+ * deadline already reached does not wait (the call still succeeds if it
+ * can at once); CHM_FOREVER: no limit. */
+
 /* Send a message of `len` bytes (data may be NULL when len is 0) with a
  * type and a priority. chm_msgq_send waits as long as the queue is full;
- * chm_msgq_send_timed at most `timeout_ns` (0: do not wait; < 0: no
- * limit); chm_msgq_try_send never waits.
- * Errors: -EAGAIN full and not waiting (try, or timeout 0); -ETIMEDOUT
- * still full when the time ran out; -EMSGSIZE len > max_msg (or > max_bytes);
+ * chm_msgq_send_timed at most `timeout_ns`; chm_msgq_send_until until
+ * `deadline_ns`; chm_msgq_try_send never waits.
+ * Errors: -EAGAIN full and not waiting (try, or CHM_NO_WAIT); -ETIMEDOUT
+ * still full when the timeout ran out or the deadline came (a past one
+ * included); -EMSGSIZE len > max_msg (or > max_bytes);
  * -EINVAL bad handle, NULL data with len > 0, prio > CHM_MSGQ_PRIO_MAX;
  * -EINTR a user signal (task) or a signal handler (thread) interrupted the
  * wait; -EIDRM the queue was destroyed; -ENOTRECOVERABLE the queue is
@@ -149,15 +164,18 @@ int chm_msgq_destroy(const char* name);
  * On any error nothing was queued. */
 int chm_msgq_send(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* data, size_t len);
 int chm_msgq_send_timed(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* data, size_t len,
-                        int64_t timeout_ns);
+                        uint64_t timeout_ns);
+int chm_msgq_send_until(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* data, size_t len,
+                        uint64_t deadline_ns);
 int chm_msgq_try_send(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* data, size_t len);
 
 /* Receive the next message in the queue's order into buf (size bytes);
  * *info (may be NULL) receives its type, priority, length and sender.
  * Returns the message's length (>= 0). chm_msgq_receive waits as long as
- * the queue is empty; _timed at most `timeout_ns` (0: do not wait; < 0: no
- * limit); try_receive never waits.
- * Errors: -EAGAIN empty and not waiting; -ETIMEDOUT; -EMSGSIZE the next
+ * the queue is empty; _timed at most `timeout_ns`; _until until
+ * `deadline_ns` (see "Timeouts" above); try_receive never waits.
+ * Errors: -EAGAIN empty and not waiting (try, or CHM_NO_WAIT); -ETIMEDOUT
+ * still empty when the timeout ran out or the deadline came; -EMSGSIZE the next
  * message is longer than size (it stays queued; *info, if given, says its
  * length); -EINVAL bad handle, NULL buf with size > 0; -EINTR; -EIDRM;
  * -ENOTRECOVERABLE; -EDEADLK; -EBADMSG a list head or the message's length
@@ -165,7 +183,9 @@ int chm_msgq_try_send(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* d
  * was taken. */
 int chm_msgq_receive(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info);
 int chm_msgq_receive_timed(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info,
-                           int64_t timeout_ns);
+                           uint64_t timeout_ns);
+int chm_msgq_receive_until(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info,
+                           uint64_t deadline_ns);
 int chm_msgq_try_receive(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info);
 
 /* A snapshot of the queue (its limits as its open checked them).

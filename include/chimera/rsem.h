@@ -54,14 +54,26 @@ int chm_rsem_create(const char* name, enum chm_sem_kind kind, uint32_t initial, 
 int chm_rsem_open(const char* name, chm_rsem_t** out);
 
 /* P: take the semaphore, waiting as long as needed (chm_rsem_p), at most
- * `timeout_ns` (chm_rsem_p_timed; 0 = do not wait), or not at all
- * (chm_rsem_try_p). Errors: -EAGAIN (try_p, or timeout 0) not available;
- * -ETIMEDOUT; -EINTR a user signal interrupted the wait; -ENOSPC
- * CHM_RSEM_WAITERS are waiting already; -EINVAL not a semaphore handle;
- * -ENOTRECOVERABLE damaged by a process that died in it; -EDEADLK its
- * lock was held past 5 s by a live process. */
+ * `timeout_ns` (chm_rsem_p_timed), until the absolute time `deadline_ns`
+ * (chm_rsem_p_until), or not at all (chm_rsem_try_p).
+ * Timeouts (chimera/kernel.h): timeout_ns is relative, CHM_NO_WAIT does not
+ * wait (as try_p), CHM_FOREVER waits as long as chm_rsem_p. Compatibility:
+ * timeout_ns was int64_t with any negative value meaning no limit; a -1
+ * passed now converts to UINT64_MAX, CHM_FOREVER, and still means no
+ * limit (other negative values become huge timeouts). deadline_ns is a
+ * chm_time_now() value: a task waits on its RTPU's kernel clock (exact on
+ * the virtual clock), a host thread on CLOCK_MONOTONIC (chm_time_now()'s
+ * clock there). A deadline already reached does not wait (a free unit is
+ * still taken); CHM_FOREVER: no limit.
+ * Errors: -EAGAIN not available and not waiting (try_p, or CHM_NO_WAIT);
+ * -ETIMEDOUT still not available when the timeout ran out or the deadline
+ * came (a past deadline included); -EINTR a user signal interrupted the
+ * wait; -ENOSPC CHM_RSEM_WAITERS are waiting already; -EINVAL not a
+ * semaphore handle; -ENOTRECOVERABLE damaged by a process that died in
+ * it; -EDEADLK its lock was held past 5 s by a live process. */
 int chm_rsem_p(chm_rsem_t* sem);
-int chm_rsem_p_timed(chm_rsem_t* sem, int64_t timeout_ns);
+int chm_rsem_p_timed(chm_rsem_t* sem, uint64_t timeout_ns);
+int chm_rsem_p_until(chm_rsem_t* sem, uint64_t deadline_ns);
 int chm_rsem_try_p(chm_rsem_t* sem);
 
 /* V: wake the most urgent waiter, or count up (a binary semaphore stays

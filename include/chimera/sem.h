@@ -7,6 +7,8 @@
 
 #include <stdint.h>
 
+#include "chimera/kernel.h" /* CHM_FOREVER, CHM_NO_WAIT */
+
 #ifdef __cplusplus
 extern "C" {
 #endif
@@ -35,8 +37,20 @@ int chm_sem_destroy(chm_sem_t* sem);
  * be inconsistent. All P variants do the same. */
 int chm_sem_p(chm_sem_t* sem);
 
-/* P with a relative timeout in ns: also -ETIMEDOUT. */
+/* P waiting at most `timeout_ns` (relative, chimera/kernel.h "Timeouts"):
+ * CHM_NO_WAIT takes a free unit or fails at once with -EAGAIN (as
+ * chm_sem_try_p); CHM_FOREVER waits as long as chm_sem_p. Task context.
+ * Errors: those of chm_sem_p; -EAGAIN none free and CHM_NO_WAIT;
+ * -ETIMEDOUT none came within timeout_ns; -EPERM not a task (only when
+ * it would have to wait). */
 int chm_sem_p_timed(chm_sem_t* sem, uint64_t timeout_ns);
+
+/* P waiting until the absolute time `deadline_ns` (a chm_time_now()
+ * value, on the kernel's clock; exact on the virtual clock), for loops
+ * that wait against a fixed instant. A deadline already reached does not
+ * wait: a free unit is taken, else -ETIMEDOUT. CHM_FOREVER: no limit.
+ * Task context. Errors: those of chm_sem_p_timed, but never -EAGAIN. */
+int chm_sem_p_until(chm_sem_t* sem, uint64_t deadline_ns);
 
 /* P without blocking: 0 or -EAGAIN. Any task context. */
 int chm_sem_try_p(chm_sem_t* sem);

@@ -15,12 +15,14 @@
  * Errors under global handling (chimera/err.h): -EINVAL, -ENOTCONN and
  * -EPERM (unlocking a lock this caller does not hold) are raised as error
  * signals of module "ipc" (chm_ipc_err_module, chimera/bp.h) when a task
- * with global handling on gets them; the outcomes -ETIMEDOUT, -EBUSY and
- * -EOWNERDEAD are only returned. */
+ * with global handling on gets them; the outcomes -ETIMEDOUT, -EAGAIN,
+ * -EBUSY and -EOWNERDEAD are only returned. */
 #ifndef CHIMERA_SPIN_H
 #define CHIMERA_SPIN_H
 
 #include <stdint.h>
+
+#include "chimera/kernel.h" /* CHM_FOREVER, CHM_NO_WAIT */
 
 #ifdef __cplusplus
 extern "C" {
@@ -35,7 +37,8 @@ typedef struct chm_spin {
     uint32_t reserved;
 } chm_spin_t;
 
-#define CHM_SPIN_FOREVER UINT64_MAX
+/* The old name of CHM_FOREVER (chimera/kernel.h), kept for existing code. */
+#define CHM_SPIN_FOREVER CHM_FOREVER
 
 /* Make `lock` free. Errors: -EINVAL NULL or misaligned. */
 int chm_spin_init(chm_spin_t* lock);
@@ -43,10 +46,14 @@ int chm_spin_init(chm_spin_t* lock);
 /* Acquire `lock`. For the first poll_interval_ns the waiter tests the lock
  * continuously; after that it tests once every poll_interval_ns and gives
  * the CPU away in between (poll_interval_ns 0 means 10 µs). timeout_ns
- * bounds the whole wait (CHM_SPIN_FOREVER: no bound; 0: one attempt).
+ * bounds the whole wait, relative (chimera/kernel.h "Timeouts"; measured on
+ * CLOCK_MONOTONIC, also under a virtual-clock kernel): CHM_FOREVER (or
+ * CHM_SPIN_FOREVER) no bound; CHM_NO_WAIT one attempt.
  * Returns 0; -EOWNERDEAD: acquired, but the previous holder died holding
- * it (repair the data it protects); -ETIMEDOUT: not acquired within
- * timeout_ns; -EINVAL NULL or misaligned; -ENOTCONN not attached.
+ * it (repair the data it protects); -EAGAIN: held by another, and
+ * timeout_ns is CHM_NO_WAIT (it was -ETIMEDOUT before the timeout
+ * convention); -ETIMEDOUT: not acquired within a positive timeout_ns;
+ * -EINVAL NULL or misaligned; -ENOTCONN not attached.
  * Not recursive: a second lock by the same RTPU waits like anyone else. */
 int chm_spin_lock(chm_spin_t* lock, uint64_t poll_interval_ns, uint64_t timeout_ns);
 

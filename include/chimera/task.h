@@ -207,15 +207,17 @@ typedef struct chm_task_status {
  * Errors: -ESRCH unknown task (or ended and its slot reused), -EINVAL NULL. */
 int chm_task_status(chm_tid_t task, chm_task_status_t* out);
 
-/* Wait until `task` ends (at most timeout_ns; CHM_FOREVER, CHM_NO_WAIT),
- * then give its final status (out may be NULL: end_reason and exit_status
- * say how it ended) and free its slot: its id is stale from then on. Only
- * a task spawned with attr.joinable can be joined, by one task at a time;
- * it keeps its slot until then. Task context.
+/* Wait until `task` ends (at most timeout_ns, relative, chimera/kernel.h
+ * "Timeouts": CHM_NO_WAIT only looks, CHM_FOREVER waits as long as it
+ * takes), then give its final status (out may be NULL: end_reason and
+ * exit_status say how it ended) and free its slot: its id is stale from
+ * then on. Only a task spawned with attr.joinable can be joined, by one
+ * task at a time; it keeps its slot until then. Task context.
  * Errors: -ESRCH unknown task; -EINVAL not joinable; -EDEADLK joining
- * itself; -EBUSY another task joins it; -ETIMEDOUT it did not end in time
- * (it stays joinable); -EINTR a user signal interrupted the wait; -EPERM
- * not in a task. */
+ * itself; -EBUSY another task joins it; -EAGAIN it has not ended and
+ * timeout_ns is CHM_NO_WAIT; -ETIMEDOUT it did not end within timeout_ns
+ * (either way it stays joinable); -EINTR a user signal interrupted the
+ * wait; -EPERM not in a task. */
 int chm_task_join(chm_tid_t task, uint64_t timeout_ns, chm_task_status_t* out);
 
 /* Number of tasks alive. Any context. */

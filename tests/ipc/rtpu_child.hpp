@@ -15,6 +15,7 @@ namespace chm::test {
 struct RtpuOptions {
     chm_sched_policy policy = CHM_SCHED_MUF;  // the kernel's default
     std::uint64_t idle_poll_ns = 0;           // poll the doorbell before sleeping
+    int virtual_clock = 0;                    // 1: virtual clock, doorbell not bound
 };
 
 // Returns the kernel's exit code, or 90..93 when a step before it failed
@@ -26,11 +27,14 @@ int run_rtpu(const std::string& path, int slot, Spawn spawn_tasks, RtpuOptions o
     chm_kernel_config_init(&cfg);
     cfg.policy = o.policy;
     cfg.idle_poll_ns = o.idle_poll_ns;
+    cfg.virtual_clock = o.virtual_clock;
     if (chm_kernel_init(&cfg) != 0) return 91;
-    if (chm::ipc::wake_bind_kernel() != 0) return 92;
+    // A virtual-clock kernel has no thread peers can signal: not bound
+    // (its own tasks still wake each other; other processes' grants do not).
+    if (!o.virtual_clock && chm::ipc::wake_bind_kernel() != 0) return 92;
     if (!spawn_tasks()) return 93;
     const int r = chm_kernel_run();
-    chm::ipc::wake_unbind_kernel();
+    if (!o.virtual_clock) chm::ipc::wake_unbind_kernel();
     chm_kernel_fini();
     chm_bp_leave();
     return r;

@@ -184,6 +184,41 @@ TEST_F(BlockingIo, PollTimesOutWhileOthersRun) {
     expect_rtpu_kept_running();
 }
 
+// chm_io_poll's timeout (chimera/kernel.h, "Timeouts"): CHM_NO_WAIT only
+// looks; CHM_FOREVER and a -1 from a caller of the old int64_t signature
+// (it converts to CHM_FOREVER) wait for the data however long it takes.
+std::uint64_t g_poll_timeout = 0;
+void io_poller(void*) {
+    measured([] {
+        pollfd p{g_fd[0], POLLIN, 0};
+        const int looked = chm_io_poll(&p, 1, CHM_NO_WAIT);
+        if (looked != 0) return ssize_t(100 + looked);  // nothing written yet
+        const int r = chm_io_poll(&p, 1, g_poll_timeout);
+        return r == 1 && (p.revents & POLLIN) ? ssize_t(::read(g_fd[0], g_out.buf, sizeof g_out.buf)) : ssize_t(r);
+    });
+}
+
+TEST_F(BlockingIo, IoPollForeverWaitsForTheData) {
+    const std::int64_t old_forever = -1;  // what callers passed before: still no limit
+    for (const std::uint64_t t : {CHM_FOREVER, std::uint64_t(old_forever)}) {
+        ASSERT_EQ(t, CHM_FOREVER);
+        g_out = Outcome{};
+        GapTicker::reset();
+        g_poll_timeout = t;
+        start_with_ticker();
+        spawn(io_poller, nullptr, "poller", 1);
+        write_later(g_fd[1], "late", 120);
+        ASSERT_EQ(chm_kernel_run(), 0);
+        helper_.join();
+        chm_kernel_fini();
+        started_ = false;
+        EXPECT_EQ(g_out.r, 4) << "100+: CHM_NO_WAIT saw data that was not there";
+        EXPECT_STREQ(g_out.buf, "late");
+        EXPECT_GE(g_out.waited, 100 * kMs);
+        expect_rtpu_kept_running();
+    }
+}
+
 int g_sock[2];
 void receiver(void*) {
     measured([] { return ::recv(g_sock[0], g_out.buf, sizeof g_out.buf, 0); });

@@ -49,7 +49,7 @@ void try_and_timeout(void*) {
     EXPECT_EQ(chm_sem_v(&g_sem), 0);
     EXPECT_EQ(chm_sem_v(&g_sem), -EOVERFLOW) << "binary semaphore already 1";
     EXPECT_EQ(chm_sem_try_p(&g_sem), 0);
-    EXPECT_EQ(chm_sem_p_timed(&g_sem, 0), -ETIMEDOUT);
+    EXPECT_EQ(chm_sem_p_timed(&g_sem, CHM_NO_WAIT), -EAGAIN);
 }
 
 TEST_F(Sync, TryPTimeoutAndOverflow) {

@@ -135,13 +135,6 @@ int get_locked(const bp::View& v, QueueHeader* q, const Geo& g, void* buf, std::
     return int(len);
 }
 
-std::uint64_t now_ns(bool task) {
-    if (task) return chm_time_now();
-    timespec ts{};
-    clock_gettime(CLOCK_MONOTONIC, &ts);
-    return std::uint64_t(ts.tv_sec) * 1000000000ull + std::uint64_t(ts.tv_nsec);
-}
-
 std::int32_t my_priority(bool task) { return task ? kernel::remote_waiter_priority() : 0; }
 
 WaiterId recorded(const Waiter* w) { return WaiterId{w->task.load(R), w->urgency.load(R)}; }
@@ -215,7 +208,7 @@ struct RecvOp {
 
 // The whole operation, lock to unlock.
 template <class Op>
-int run(const bp::Attachment* a, QueueHeader* q, const Geo& g, const Op& op, std::int64_t timeout_ns) {
+int run(const bp::Attachment* a, QueueHeader* q, const Geo& g, const Op& op, WaitLimit limit) {
     int r = lock_queue(*a, q, g, a->token);
     if (r) return r;
     WakeBuf<2> wakes;
@@ -233,7 +226,9 @@ int run(const bp::Attachment* a, QueueHeader* q, const Geo& g, const Op& op, std
     const WaiterId who = waiter_self();
     const bool task = who.as_task();
     const std::int32_t prio = my_priority(task);
-    const std::uint64_t start = timeout_ns > 0 ? now_ns(task) : 0;
+    // The deadline on wait_word's clock, fixed once: every round of the
+    // loop (a grant another caller took first, a poll) counts against it.
+    const std::uint64_t deadline = limit.deadline();
     bool timed_out = false;
     for (;;) {
         if (q->destroyed.load(R)) {
@@ -247,18 +242,18 @@ int run(const bp::Attachment* a, QueueHeader* q, const Geo& g, const Op& op, std
             bp::lock_clear_dirty(&q->lock);
             break;
         }
-        if (timeout_ns == 0) {
+        if (limit.kind == WaitLimit::kNoWait) {
             r = -EAGAIN;
             break;
         }
-        std::int64_t left = -1;
-        if (timeout_ns > 0) {
-            const std::uint64_t spent = now_ns(task) - start;
-            if (timed_out || spent >= std::uint64_t(timeout_ns)) {
+        std::uint64_t left = CHM_FOREVER;  // for the poll below
+        if (deadline != CHM_FOREVER) {
+            const std::uint64_t now = wait_now();
+            if (timed_out || now >= deadline) {  // a deadline past at entry: no wait
                 r = -ETIMEDOUT;
                 break;
             }
-            left = timeout_ns - std::int64_t(spent);
+            left = deadline - now;
         }
         const std::uint32_t initial = wait_word_initial();
         bp::lock_mark_dirty(&q->lock);
@@ -268,10 +263,9 @@ int run(const bp::Attachment* a, QueueHeader* q, const Geo& g, const Op& op, std
         unlock_queue(q);
         int wr;
         if (w) {
-            wr = wait_word(word_of(w->word), left);
+            wr = wait_word(word_of(w->word), deadline);
         } else {  // every record taken: poll
-            const std::int64_t nap = left >= 0 && left < 1000000 ? left : 1000000;
-            bp::relinquish(std::uint64_t(nap));
+            bp::relinquish(left < 1000000 ? left : 1000000);
             wr = 0;
         }
         if ((r = lock_queue(*a, q, g, a->token)) != 0) return r;
@@ -299,7 +293,7 @@ int run(const bp::Attachment* a, QueueHeader* q, const Geo& g, const Op& op, std
 }
 
 int send_common(const char* fn, chm_msgq_t* h, std::uint32_t type, std::uint32_t prio, const void* data,
-                std::size_t len, std::int64_t timeout_ns) {
+                std::size_t len, WaitLimit limit) {
     bp::Attachment* a = bp::current();
     if (!a) return bp::set_error("%s: not attached to a backplane", fn), -ENOTCONN;
     const Geo* g;
@@ -311,11 +305,11 @@ int send_common(const char* fn, chm_msgq_t* h, std::uint32_t type, std::uint32_t
         return bp::set_error("%s: %zu bytes, the queue takes at most %u", fn, len,
                              g->max_msg < g->max_bytes ? g->max_msg : g->max_bytes), -EMSGSIZE;
     const SendOp op{a->slot, type, prio, std::uint32_t(len), data};
-    return run(a, q, *g, op, timeout_ns);
+    return run(a, q, *g, op, limit);
 }
 
 int recv_common(const char* fn, chm_msgq_t* h, void* buf, std::size_t size, chm_msgq_msg_info_t* info,
-                std::int64_t timeout_ns) {
+                WaitLimit limit) {
     bp::Attachment* a = bp::current();
     if (!a) return bp::set_error("%s: not attached to a backplane", fn), -ENOTCONN;
     const Geo* g;
@@ -323,7 +317,7 @@ int recv_common(const char* fn, chm_msgq_t* h, void* buf, std::size_t size, chm_
     if (!q) return bad_handle(fn, h);
     if (!buf && size) return bp::set_error("%s: NULL buffer", fn), -EINVAL;
     const RecvOp op{buf, size, info};
-    return run(a, q, *g, op, timeout_ns);
+    return run(a, q, *g, op, limit);
 }
 
 }  // namespace
@@ -413,6 +407,8 @@ void purge_token_locked(const bp::View& v, QueueHeader* q, const Geo& g, std::ui
 }  // namespace chm::ipc::msgq
 
 using namespace chm::ipc::msgq;
+using chm::ipc::wait_for;
+using chm::ipc::wait_until;
 
 // The public calls leave through ipc::leave: a failure becomes an error
 // signal of module "ipc" under global handling (ipc/err/report.hpp), once
@@ -420,33 +416,47 @@ using namespace chm::ipc::msgq;
 extern "C" {
 
 int chm_msgq_send(chm_msgq_t* q, std::uint32_t type, std::uint32_t prio, const void* data, size_t len) {
-    return chm::ipc::leave(send_common("chm_msgq_send", q, type, prio, data, len, -1), "chm_msgq_send");
+    return chm::ipc::leave(send_common("chm_msgq_send", q, type, prio, data, len, wait_for(CHM_FOREVER)),
+                           "chm_msgq_send");
 }
 
 int chm_msgq_send_timed(chm_msgq_t* q, std::uint32_t type, std::uint32_t prio, const void* data, size_t len,
-                        std::int64_t timeout_ns) {
-    return chm::ipc::leave(
-        send_common("chm_msgq_send_timed", q, type, prio, data, len, timeout_ns < 0 ? -1 : timeout_ns),
-        "chm_msgq_send_timed");
+                        std::uint64_t timeout_ns) {
+    return chm::ipc::leave(send_common("chm_msgq_send_timed", q, type, prio, data, len, wait_for(timeout_ns)),
+                           "chm_msgq_send_timed");
+}
+
+int chm_msgq_send_until(chm_msgq_t* q, std::uint32_t type, std::uint32_t prio, const void* data, size_t len,
+                        std::uint64_t deadline_ns) {
+    return chm::ipc::leave(send_common("chm_msgq_send_until", q, type, prio, data, len, wait_until(deadline_ns)),
+                           "chm_msgq_send_until");
 }
 
 int chm_msgq_try_send(chm_msgq_t* q, std::uint32_t type, std::uint32_t prio, const void* data, size_t len) {
-    return chm::ipc::leave(send_common("chm_msgq_try_send", q, type, prio, data, len, 0), "chm_msgq_try_send");
+    return chm::ipc::leave(send_common("chm_msgq_try_send", q, type, prio, data, len, wait_for(CHM_NO_WAIT)),
+                           "chm_msgq_try_send");
 }
 
 int chm_msgq_receive(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info) {
-    return chm::ipc::leave(recv_common("chm_msgq_receive", q, buf, size, info, -1), "chm_msgq_receive");
+    return chm::ipc::leave(recv_common("chm_msgq_receive", q, buf, size, info, wait_for(CHM_FOREVER)),
+                           "chm_msgq_receive");
 }
 
 int chm_msgq_receive_timed(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info,
-                           std::int64_t timeout_ns) {
-    return chm::ipc::leave(
-        recv_common("chm_msgq_receive_timed", q, buf, size, info, timeout_ns < 0 ? -1 : timeout_ns),
-        "chm_msgq_receive_timed");
+                           std::uint64_t timeout_ns) {
+    return chm::ipc::leave(recv_common("chm_msgq_receive_timed", q, buf, size, info, wait_for(timeout_ns)),
+                           "chm_msgq_receive_timed");
+}
+
+int chm_msgq_receive_until(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info,
+                           std::uint64_t deadline_ns) {
+    return chm::ipc::leave(recv_common("chm_msgq_receive_until", q, buf, size, info, wait_until(deadline_ns)),
+                           "chm_msgq_receive_until");
 }
 
 int chm_msgq_try_receive(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info) {
-    return chm::ipc::leave(recv_common("chm_msgq_try_receive", q, buf, size, info, 0), "chm_msgq_try_receive");
+    return chm::ipc::leave(recv_common("chm_msgq_try_receive", q, buf, size, info, wait_for(CHM_NO_WAIT)),
+                           "chm_msgq_try_receive");
 }
 
 }  // extern "C"

@@ -357,7 +357,7 @@ static int rsem_open_impl(const char* name, chm_rsem_t** out) {
     return r;
 }
 
-static int rsem_p_timed_impl(chm_rsem_t* h, int64_t timeout_ns) {
+static int rsem_p_impl(chm_rsem_t* h, WaitLimit limit) {
     Rsem* s = from_handle(h);
     if (!s) return set_error("chm_rsem_p: not a remote semaphore handle"), -EINVAL;
     Attachment* a = current();
@@ -367,9 +367,14 @@ static int rsem_p_timed_impl(chm_rsem_t* h, int64_t timeout_ns) {
         unlock(s);
         return 0;
     }
-    if (timeout_ns == 0) {
+    if (limit.kind == WaitLimit::kNoWait) {
         unlock(s);
         return -EAGAIN;
+    }
+    const std::uint64_t deadline = limit.deadline();
+    if (deadline != CHM_FOREVER && wait_now() >= deadline) {  // a deadline already past
+        unlock(s);
+        return -ETIMEDOUT;
     }
     Waiter* me = nullptr;
     for (Waiter& w : s->w) {
@@ -406,7 +411,7 @@ static int rsem_p_timed_impl(chm_rsem_t* h, int64_t timeout_ns) {
     lock_clear_dirty(&s->lock);
     unlock(s);
 
-    int r = wait_word(grant, timeout_ns);
+    int r = wait_word(grant, deadline);
 
     // Granted: the granter already took the record off the waiting list
     // (kGranted, nwaiting), so giving it back needs no lock: a hand-off
@@ -496,11 +501,16 @@ int chm_rsem_create(const char* name, enum chm_sem_kind kind, uint32_t initial, 
 int chm_rsem_open(const char* name, chm_rsem_t** out) {
     return chm::ipc::leave(rsem_open_impl(name, out), "chm_rsem_open");
 }
-int chm_rsem_p_timed(chm_rsem_t* sem, int64_t timeout_ns) {
-    return chm::ipc::leave(rsem_p_timed_impl(sem, timeout_ns), "chm_rsem_p_timed");
+int chm_rsem_p_timed(chm_rsem_t* sem, uint64_t timeout_ns) {
+    return chm::ipc::leave(rsem_p_impl(sem, wait_for(timeout_ns)), "chm_rsem_p_timed");
 }
-int chm_rsem_p(chm_rsem_t* sem) { return chm::ipc::leave(rsem_p_timed_impl(sem, -1), "chm_rsem_p"); }
-int chm_rsem_try_p(chm_rsem_t* sem) { return chm::ipc::leave(rsem_p_timed_impl(sem, 0), "chm_rsem_try_p"); }
+int chm_rsem_p_until(chm_rsem_t* sem, uint64_t deadline_ns) {
+    return chm::ipc::leave(rsem_p_impl(sem, wait_until(deadline_ns)), "chm_rsem_p_until");
+}
+int chm_rsem_p(chm_rsem_t* sem) { return chm::ipc::leave(rsem_p_impl(sem, wait_for(CHM_FOREVER)), "chm_rsem_p"); }
+int chm_rsem_try_p(chm_rsem_t* sem) {
+    return chm::ipc::leave(rsem_p_impl(sem, wait_for(CHM_NO_WAIT)), "chm_rsem_try_p");
+}
 int chm_rsem_v(chm_rsem_t* sem) { return chm::ipc::leave(rsem_v_impl(sem), "chm_rsem_v"); }
 int chm_rsem_value(chm_rsem_t* sem) { return chm::ipc::leave(rsem_value_impl(sem), "chm_rsem_value"); }
 int chm_rsem_waiting(chm_rsem_t* sem) { return chm::ipc::leave(rsem_waiting_impl(sem), "chm_rsem_waiting"); }

@@ -47,9 +47,9 @@ int chm_spin_lock(chm_spin_t* lock, uint64_t poll_interval_ns, uint64_t timeout_
     if (!l) return chm::ipc::leave(-EINVAL, "chm_spin_lock");
     const Attachment* a = current();
     if (!a) return chm::ipc::leave(-ENOTCONN, "chm_spin_lock");
-    if (timeout_ns == 0) {
+    if (timeout_ns == CHM_NO_WAIT) {  // one attempt; busy is -EAGAIN, as every CHM_NO_WAIT
         const int r = lock_try(*a, l, a->token);
-        return chm::ipc::leave(r == -EBUSY ? -ETIMEDOUT : r, "chm_spin_lock");
+        return chm::ipc::leave(r == -EBUSY ? -EAGAIN : r, "chm_spin_lock");
     }
     return chm::ipc::leave(lock_acquire(*a, l, a->token, poll_interval_ns, timeout_ns), "chm_spin_lock");
 }

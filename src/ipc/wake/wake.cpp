@@ -9,6 +9,7 @@
 #include <unistd.h>
 
 #include "chimera/irq.h"
+#include "chimera/kernel.h"
 #include "ipc/backplane/backplane.hpp"
 #include "kernel/sync/remote_wait.hpp"
 #include "port.hpp"
@@ -84,25 +85,54 @@ int wake_ring(std::uint32_t slot, int vector) {
     return c.result == -EPERM ? -EPERM : 0;
 }
 
-int wait_word(std::uint32_t* word, std::int64_t timeout_ns) {
-    if (kernel::remote_wait_possible()) return kernel::remote_wait(word, timeout_ns);
-    // A host thread (or the kernel thread outside a task): the futex.
-    timespec deadline{};
-    if (timeout_ns >= 0) {
-        clock_gettime(CLOCK_MONOTONIC, &deadline);
-        const std::int64_t ns = deadline.tv_nsec + timeout_ns % 1000000000;
-        deadline.tv_sec += time_t(timeout_ns / 1000000000 + ns / 1000000000);
-        deadline.tv_nsec = long(ns % 1000000000);
+std::uint64_t wait_now() { return kernel::remote_wait_possible() ? chm_time_now() : port::now_ns(); }
+
+WaitLimit wait_for(std::uint64_t timeout_ns) {
+    if (timeout_ns == CHM_NO_WAIT) return WaitLimit{WaitLimit::kNoWait, 0};
+    if (timeout_ns == CHM_FOREVER) return WaitLimit{WaitLimit::kForever, 0};
+    return WaitLimit{WaitLimit::kFor, timeout_ns};
+}
+
+WaitLimit wait_until(std::uint64_t deadline_ns) {
+    if (deadline_ns == CHM_FOREVER) return WaitLimit{WaitLimit::kForever, 0};
+    return WaitLimit{WaitLimit::kUntil, deadline_ns};
+}
+
+std::uint64_t WaitLimit::deadline() const {
+    switch (kind) {
+    case kForever: return CHM_FOREVER;
+    case kNoWait: return 0;  // already past
+    case kFor: {
+        const std::uint64_t now = wait_now();
+        return now + ns < now ? CHM_FOREVER : now + ns;
     }
+    case kUntil: break;
+    }
+    // A deadline on chm_time_now()'s clock. A parked task waits on that
+    // very clock: exact, on the virtual clock too. Another thread sleeps
+    // on CLOCK_MONOTONIC, which is chm_time_now()'s clock unless this
+    // process's kernel runs a virtual clock; then (virtual time does not
+    // pass for a thread that is no task) the time left at entry is waited
+    // on the monotonic clock, computed once: both clocks are monotonic, so
+    // the wait neither ends early nor is stretched by a clock step.
+    if (kernel::remote_wait_possible() || !kernel::clock_is_virtual()) return ns;
+    const std::uint64_t now = chm_time_now();
+    if (ns <= now) return 0;  // already past: no wait
+    const std::uint64_t mono = port::now_ns(), left = ns - now;
+    return mono + left < mono ? CHM_FOREVER : mono + left;
+}
+
+int wait_word(std::uint32_t* word, std::uint64_t deadline) {
+    if (kernel::remote_wait_possible()) return kernel::remote_wait(word, deadline);
+    // A host thread (or the kernel thread outside a task): the futex,
+    // CLOCK_MONOTONIC (port::now_ns), the time left recomputed each round.
     while (!kernel::word_granted(__atomic_load_n(word, __ATOMIC_ACQUIRE))) {
         timespec left{};
         timespec* limit = nullptr;
-        if (timeout_ns >= 0) {
-            timespec now;
-            clock_gettime(CLOCK_MONOTONIC, &now);
-            std::int64_t d = (deadline.tv_sec - now.tv_sec) * 1000000000LL +
-                             (deadline.tv_nsec - now.tv_nsec);
-            if (d <= 0) return -ETIMEDOUT;
+        if (deadline != CHM_FOREVER) {
+            const std::uint64_t now = port::now_ns();
+            if (now >= deadline) return -ETIMEDOUT;
+            const std::uint64_t d = deadline - now;
             left.tv_sec = time_t(d / 1000000000);
             left.tv_nsec = long(d % 1000000000);
             limit = &left;
@@ -133,13 +163,13 @@ void grant_word(std::uint32_t* word, std::uint32_t value, std::uint32_t slot, Wa
 void wake_granted(std::uint32_t* word, std::uint32_t slot, WaiterId who) {
     bp::Attachment* a = bp::current();
     bp::RtpuEntry* e = a && slot < a->slots() ? a->rtpu(slot) : nullptr;
+    // Our own RTPU, from one of its tasks: scan its parked tasks. Bound or
+    // not (a virtual-clock kernel has no thread for peers to signal, so it
+    // is not bound, but its own tasks wake each other).
+    if (who.as_task() && e && slot == a->slot && port::on_kernel_thread()) return kernel::remote_scan();
     if (who.as_task() && e && e->tid.load() != 0) {
-        if (slot == a->slot && port::on_kernel_thread()) {
-            kernel::remote_scan();  // our own RTPU, from one of its tasks
-        } else {
-            port::doorbell_ring(doorbell_of(e), 1u << kernel::kGrantVector, interrupt_slot, slot_ctx(slot),
-                                port::RingFor{who.urgency, who.task});
-        }
+        port::doorbell_ring(doorbell_of(e), 1u << kernel::kGrantVector, interrupt_slot, slot_ctx(slot),
+                            port::RingFor{who.urgency, who.task});
         return;
     }
     syscall(SYS_futex, word, FUTEX_WAKE, 1, nullptr, nullptr, 0);  // a thread on the futex

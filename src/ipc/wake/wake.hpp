@@ -35,10 +35,32 @@ int wake_ring(std::uint32_t slot, int vector);
 // grant then rings nothing; else 0.
 std::uint32_t wait_word_initial();
 
+// The clock wait_word measures its deadline on: the kernel's (chm_time_now:
+// virtual or monotonic) when it parks the caller as a task,
+// CLOCK_MONOTONIC on any other thread.
+std::uint64_t wait_now();
+
+// How long a backplane call may wait (chimera/kernel.h, "Timeouts"), as
+// its caller gave it. Resolved to a deadline on wait_now()'s clock only
+// when the call has to wait, so the path that need not wait reads no clock.
+struct WaitLimit {
+    enum Kind : std::uint8_t { kForever, kNoWait, kFor, kUntil };
+    Kind kind = kForever;
+    std::uint64_t ns = 0;  // kFor: relative timeout; kUntil: a chm_time_now() deadline
+    // The deadline on wait_now()'s clock; UINT64_MAX: none; kNoWait: 0, past
+    // (callers fail with -EAGAIN before they get here).
+    std::uint64_t deadline() const;
+};
+// CHM_NO_WAIT (0) gives kNoWait, CHM_FOREVER kForever.
+WaitLimit wait_for(std::uint64_t timeout_ns);
+// CHM_FOREVER gives kForever.
+WaitLimit wait_until(std::uint64_t deadline_ns);
+
 // Wait until *word != 0: parks only the calling task on an RTPU, sleeps on
-// the word's futex on any other thread. timeout_ns < 0: no limit.
-// Returns 0, -ETIMEDOUT or -EINTR.
-int wait_word(std::uint32_t* word, std::int64_t timeout_ns);
+// the word's futex on any other thread, until `deadline` on wait_now()'s
+// clock (UINT64_MAX: no limit; one already reached: -ETIMEDOUT at once
+// unless the word is set). Returns 0, -ETIMEDOUT or -EINTR.
+int wait_word(std::uint32_t* word, std::uint64_t deadline);
 
 // Who waits on a word, as the granter needs it; a waiter records this
 // beside its word (two words in backplane memory).

@@ -264,9 +264,9 @@ int await(Pending* p, void* reply, std::uint32_t cap, std::uint32_t* reply_len) 
                       static_cast<unsigned long long>(timeout_ns / 1000000));
             return -ETIMEDOUT;
         }
-        std::int64_t slice = std::int64_t(deadline - now);
-        if (slice > kSliceNs) slice = kSliceNs;
-        ipc::wait_word(word, slice);  // -EINTR (a user signal): keep waiting, bounded
+        std::uint64_t slice = deadline - now;
+        if (slice > std::uint64_t(kSliceNs)) slice = std::uint64_t(kSliceNs);
+        ipc::wait_word(word, ipc::wait_for(slice).deadline());  // -EINTR (a user signal): keep waiting, bounded
     }
 }
 

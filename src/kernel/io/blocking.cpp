@@ -83,7 +83,7 @@ bool park_until_ready(int fd, short events) {
         if (r != 0) return true;  // ready, or an error the real call reports
         const int fl = fcntl(fd, F_GETFL);
         if (fl < 0 || (fl & O_NONBLOCK)) return true;  // the caller wants EAGAIN
-        const int w = chm_io_poll(&p, 1, -1);
+        const int w = chm_io_poll(&p, 1, CHM_FOREVER);
         if (w == -EINTR) {
             errno = EINTR;
             return false;
@@ -255,7 +255,7 @@ int accept(int fd, sockaddr* addr, socklen_t* len) {
 int poll(pollfd* fds, nfds_t n, int timeout_ms) {
     CHM_REAL(poll);
     if (!parkable()) return real_poll(fds, n, timeout_ms);
-    const int r = chm_io_poll(fds, n, timeout_ms < 0 ? -1 : std::int64_t(timeout_ms) * 1000000);
+    const int r = chm_io_poll(fds, n, timeout_ms < 0 ? CHM_FOREVER : std::uint64_t(timeout_ms) * 1000000);
     if (r < 0) {
         errno = -r;
         return -1;

@@ -26,10 +26,10 @@ pollfd g_polled[kMaxPolled];
 
 // poll(2) without the interposed wrapper (io/blocking.cpp), which would
 // recurse here; ppoll is a plain system call, safe in the signal handler.
-int poll_for(pollfd* fds, std::size_t n, std::int64_t timeout_ns) {
+int poll_for(pollfd* fds, std::size_t n, std::uint64_t timeout_ns) {
     timespec ts{};
     timespec* limit = nullptr;
-    if (timeout_ns >= 0) {
+    if (timeout_ns != CHM_FOREVER) {
         ts.tv_sec = time_t(timeout_ns / 1000000000);
         ts.tv_nsec = long(timeout_ns % 1000000000);
         limit = &ts;
@@ -127,12 +127,12 @@ void io_idle_wait_locked() {
 using namespace chm::kernel;
 namespace port = chm::port;
 
-extern "C" int chm_io_poll(struct pollfd* fds, unsigned long nfds, int64_t timeout_ns) {
+extern "C" int chm_io_poll(struct pollfd* fds, unsigned long nfds, uint64_t timeout_ns) {
     if (!fds && nfds) return record_failure(-EFAULT, "chm_io_poll");
     if (nfds > kMaxPolled) return record_failure(-EINVAL, "chm_io_poll");
     for (unsigned long i = 0; i < nfds; ++i) fds[i].revents = 0;
     const int now_ready = poll_for(fds, nfds, 0);
-    if (now_ready != 0 || timeout_ns == 0) return now_ready < 0 ? -errno : now_ready;
+    if (now_ready != 0 || timeout_ns == CHM_NO_WAIT) return now_ready < 0 ? -errno : now_ready;
     port::irq_disable();
     Tcb* cur = g_k.current;
     if (!cur || cur->lock_nest || !port::on_kernel_thread()) {
@@ -148,9 +148,9 @@ extern "C" int chm_io_poll(struct pollfd* fds, unsigned long nfds, int64_t timeo
     cur->wait_result = 0;
     waitq_insert_locked(&g_k.io_waiters, cur);
     const std::uint64_t now = now_locked();
-    if (timeout_ns > 0) {
+    if (timeout_ns != CHM_FOREVER) {
         cur->tmr.kind = TimerKind::Wake;
-        timer_add_locked(&cur->tmr, now + std::uint64_t(timeout_ns));
+        timer_add_locked(&cur->tmr, now + timeout_ns < now ? CHM_FOREVER : now + timeout_ns);
     }
     io_busy_arm_locked(now);
     timer_program_locked(now);

@@ -156,12 +156,17 @@ bool only_waiting_locked() {
 }
 
 // How long the caller may spin before it parks (0: not at all): the idle
-// poll, when the RTPU polls and has nothing else to do. Mask held.
-std::uint64_t spin_limit_locked(std::int64_t timeout_ns) {
+// poll, when the RTPU polls and has nothing else to do, but never past
+// `deadline` (kernel clock, which is port::now_ns() whenever spinning is
+// possible: not on the virtual clock). Mask held.
+std::uint64_t spin_limit_locked(std::uint64_t deadline) {
     const std::uint64_t poll = g_k.cfg.idle_poll_ns;
-    if (!poll || timeout_ns == 0 || g_k.cfg.virtual_clock || io_watching_locked()) return 0;
+    if (!poll || g_k.cfg.virtual_clock || io_watching_locked()) return 0;
     if (!only_waiting_locked()) return 0;
-    return timeout_ns > 0 && std::uint64_t(timeout_ns) < poll ? std::uint64_t(timeout_ns) : poll;
+    if (deadline == CHM_FOREVER) return poll;
+    const std::uint64_t now = now_locked();
+    if (now >= deadline) return 0;
+    return deadline - now < poll ? deadline - now : poll;
 }
 
 // How a spin ended: granted, something else to run (or a tick or vector
@@ -199,13 +204,15 @@ Spun spin_watched(std::uint32_t* word, std::uint64_t end, std::uint32_t taken) {
 std::uint32_t remote_wait_initial_word() {
     if (!remote_wait_possible()) return 0;
     IrqGuard guard;
-    if (!spin_limit_locked(-1)) return 0;
+    if (!spin_limit_locked(CHM_FOREVER)) return 0;
     // The wait begins here for user signals: the record is written next.
     g_k.current->sigs_at_wait = g_k.current->sigs_taken;
     return kWordWatched;
 }
 
-int remote_wait(std::uint32_t* word, std::int64_t timeout_ns) {
+bool clock_is_virtual() { return g_k.cfg.virtual_clock != 0; }
+
+int remote_wait(std::uint32_t* word, std::uint64_t deadline) {
     if (!remote_wait_possible()) return -EPERM;
     const std::uint32_t v = __atomic_load_n(word, __ATOMIC_ACQUIRE);
     if (word_granted(v)) return 0;
@@ -215,7 +222,7 @@ int remote_wait(std::uint32_t* word, std::int64_t timeout_ns) {
     std::uint64_t spin_ns;
     {
         IrqGuard guard;
-        spin_ns = spin_limit_locked(timeout_ns);
+        spin_ns = spin_limit_locked(deadline);
     }
     Spun spun = Spun::kOver;
     if (spin_ns) {
@@ -224,10 +231,6 @@ int remote_wait(std::uint32_t* word, std::int64_t timeout_ns) {
         const std::uint64_t t0 = port::now_ns();
         spun = spin_watched(word, t0 + spin_ns, taken);
         if (spun == Spun::kGranted) return 0;
-        if (timeout_ns > 0) {  // the spin counts against the timeout
-            const std::uint64_t spent = port::now_ns() - t0;
-            timeout_ns = spent >= std::uint64_t(timeout_ns) ? 0 : timeout_ns - std::int64_t(spent);
-        }
     }
     // Unwatched before parking: a grant from here on rings.
     if (watched && move_word(word, kWordWatched, 0)) return 0;
@@ -240,7 +243,8 @@ int remote_wait(std::uint32_t* word, std::int64_t timeout_ns) {
         deliver_pending_locked();
         return -EINTR;
     }
-    if (timeout_ns == 0) return -ETIMEDOUT;
+    const std::uint64_t now = now_locked();
+    if (now >= deadline) return -ETIMEDOUT;  // the spin counted against it too
     // The RTPU polled already: its idle loop need not poll again first.
     if (spun == Spun::kSpent) g_k.idle_poll_spent = true;
     cur->rword = word;
@@ -249,10 +253,9 @@ int remote_wait(std::uint32_t* word, std::int64_t timeout_ns) {
     cur->wait_result = 0;
     waitq_insert_locked(&g_remote, cur);
     ++g_k.remote_parks;
-    const std::uint64_t now = now_locked();
-    if (timeout_ns > 0) {
+    if (deadline != CHM_FOREVER) {
         cur->tmr.kind = TimerKind::Wake;
-        timer_add_locked(&cur->tmr, now + std::uint64_t(timeout_ns));
+        timer_add_locked(&cur->tmr, deadline);
         timer_program_locked(now);
     }
     // A grant between the test above and here rang the doorbell: its

@@ -43,12 +43,17 @@ std::uint32_t remote_waiter_urgency();
 // every switch, and when the doorbell is bound. Mask held.
 void publish_running_locked();
 
-// Park the calling task until word_granted(*word), or `timeout_ns` passes (< 0: no
-// limit). When the RTPU polls (idle_poll_ns) and has no other task ready,
+// True when the kernel runs on the virtual clock (chm_time_now() is then
+// not CLOCK_MONOTONIC).
+bool clock_is_virtual();
+
+// Park the calling task until word_granted(*word), or until `deadline` on
+// the kernel's clock (chm_time_now(); UINT64_MAX: no limit; one already
+// reached: -ETIMEDOUT at once unless the word is set). When the RTPU polls (idle_poll_ns) and has no other task ready,
 // the task first spins on the word for up to that long, in its own context
 // (preemptible), and parks only if no grant came. Returns 0 (word set), -ETIMEDOUT, -EINTR (a user signal) or
 // -EPERM (not a task that can park: use a futex instead).
-int remote_wait(std::uint32_t* word, std::int64_t timeout_ns);
+int remote_wait(std::uint32_t* word, std::uint64_t deadline);
 
 // The value a waiter's word should start at, written before a granter can
 // see it: kWordWatched when remote_wait will spin first (so a grant that

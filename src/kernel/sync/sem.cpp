@@ -100,20 +100,31 @@ void unlend_locked(Tcb* h) {
     if (queued) make_ready_locked(h, true);
 }
 
-int p_slow_locked(Sem* m, std::uint64_t timeout_ns, bool timed) {
+// How long a P may wait (chimera/kernel.h, "Timeouts"): not at all
+// (try_p, CHM_NO_WAIT: -EAGAIN), a relative timeout, or an absolute
+// deadline on the kernel clock (chm_time_now(); exact on the virtual
+// clock: the wake-up timer is armed at the deadline itself). CHM_FOREVER
+// in either form means no limit.
+enum class Limit { kNone, kTry, kRelative, kAbsolute };
+
+int p_slow_locked(Sem* m, Limit limit, std::uint64_t t) {
     Tcb* cur = g_k.current;
     if (!cur) return -EPERM;
-    if (timed && timeout_ns == 0) return -ETIMEDOUT;
+    std::uint64_t deadline = CHM_FOREVER;
+    if (limit != Limit::kNone && t != CHM_FOREVER) {
+        const std::uint64_t now = now_locked();
+        deadline = limit == Limit::kAbsolute ? t : (now + t < now ? CHM_FOREVER : now + t);
+        if (deadline <= now) return -ETIMEDOUT;  // a deadline already past: no wait
+    }
     cur->state = TaskState::Blocked;
     cur->interruptible = true;
     cur->wait_result = 0;
     waitq_insert_locked(&m->waiters, cur);
     if (m->flags & CHM_SEM_INHERIT) lend_locked(m);
-    if (timed) {
+    if (deadline != CHM_FOREVER) {
         cur->tmr.kind = TimerKind::Wake;
-        const std::uint64_t now = now_locked();
-        timer_add_locked(&cur->tmr, now + timeout_ns);
-        timer_program_locked(now);
+        timer_add_locked(&cur->tmr, deadline);
+        timer_program_locked(now_cached_locked());
     }
     int r = block_current_locked();
     if (r == 0 && m->max == 1) r = took_binary_locked(m, cur);
@@ -122,7 +133,7 @@ int p_slow_locked(Sem* m, std::uint64_t timeout_ns, bool timed) {
     return r;
 }
 
-int p_locked(chm_sem_t* s, std::uint64_t timeout_ns, bool timed, bool try_only) {
+int p_locked(chm_sem_t* s, Limit limit, std::uint64_t t) {
     Sem* m = as_sem(s);
     if (!m) return -EINVAL;
     if (m->count) [[likely]] {
@@ -130,8 +141,8 @@ int p_locked(chm_sem_t* s, std::uint64_t timeout_ns, bool timed, bool try_only) 
         if (m->max == 1) return took_binary_locked(m, g_k.current);
         return 0;
     }
-    if (try_only) return -EAGAIN;
-    return p_slow_locked(m, timeout_ns, timed);
+    if (limit == Limit::kTry || (limit == Limit::kRelative && t == CHM_NO_WAIT)) return -EAGAIN;
+    return p_slow_locked(m, limit, t);
 }
 
 }  // namespace
@@ -185,17 +196,22 @@ int chm_sem_destroy(chm_sem_t* s) {
 
 int chm_sem_p(chm_sem_t* s) {
     IrqGuard guard;
-    return raise_or_return(p_locked(s, 0, false, false), "chm_sem_p");
+    return raise_or_return(p_locked(s, Limit::kNone, 0), "chm_sem_p");
 }
 
 int chm_sem_p_timed(chm_sem_t* s, uint64_t timeout_ns) {
     IrqGuard guard;
-    return raise_or_return(p_locked(s, timeout_ns, true, false), "chm_sem_p_timed");
+    return raise_or_return(p_locked(s, Limit::kRelative, timeout_ns), "chm_sem_p_timed");
+}
+
+int chm_sem_p_until(chm_sem_t* s, uint64_t deadline_ns) {
+    IrqGuard guard;
+    return raise_or_return(p_locked(s, Limit::kAbsolute, deadline_ns), "chm_sem_p_until");
 }
 
 int chm_sem_try_p(chm_sem_t* s) {
     IrqGuard guard;
-    return raise_or_return(p_locked(s, 0, false, true), "chm_sem_try_p");
+    return raise_or_return(p_locked(s, Limit::kTry, 0), "chm_sem_try_p");
 }
 
 int chm_sem_v(chm_sem_t* s) {

@@ -165,7 +165,7 @@ int chm_task_join(chm_tid_t id, uint64_t timeout_ns, chm_task_status_t* out) {
     if (t == cur) return raise_or_return(-EDEADLK, "chm_task_join");
     if (t->joiners.head) return raise_or_return(-EBUSY, "chm_task_join");
     if (t->state != TaskState::Ended) {
-        if (timeout_ns == CHM_NO_WAIT) return record_failure(-ETIMEDOUT, "chm_task_join");
+        if (timeout_ns == CHM_NO_WAIT) return record_failure(-EAGAIN, "chm_task_join");  // an outcome, never raised
         cur->state = TaskState::Blocked;
         cur->interruptible = true;
         cur->wait_result = 0;
