@@ -86,7 +86,9 @@ int chm_rsem_value(chm_rsem_t* sem);
 /* Number of tasks and threads waiting now, or -EINVAL. */
 int chm_rsem_waiting(chm_rsem_t* sem);
 
-/* Forget this process's handle (the semaphore lives on). */
+/* Forget this process's handle (the semaphore lives on). Errors: -EINVAL
+ * not an open remote semaphore; -ENOTCONN not attached; the registry's
+ * lock errors, as chm_rsem_open's. */
 int chm_rsem_close(chm_rsem_t* sem);
 /* Remove the name; the memory goes when no process has it open.
  * Errors: -ENOTCONN; -EINVAL; -ENOENT. */

@@ -60,7 +60,8 @@ int chm_sem_try_p(chm_sem_t* sem);
  * maximum (binary: already 1); -EINVAL. Task or interrupt context. */
 int chm_sem_v(chm_sem_t* sem);
 
-/* Current count (0 while tasks wait). */
+/* Returns the current count (0 while tasks wait). Errors: -EINVAL not an
+ * initialised semaphore. Any context. */
 int chm_sem_value(const chm_sem_t* sem);
 
 #ifdef __cplusplus

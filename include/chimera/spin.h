@@ -57,8 +57,13 @@ int chm_spin_init(chm_spin_t* lock);
  * Not recursive: a second lock by the same RTPU waits like anyone else. */
 int chm_spin_lock(chm_spin_t* lock, uint64_t poll_interval_ns, uint64_t timeout_ns);
 
-/* One attempt: 0, -EOWNERDEAD (acquired from a dead holder), -EBUSY,
- * -EINVAL, -ENOTCONN. */
+/* One attempt, never waiting: 0 acquired; -EOWNERDEAD acquired from a dead
+ * holder; -EAGAIN held by another. Errors: -EINVAL NULL or misaligned;
+ * -ENOTCONN not attached. */
+int chm_spin_try_lock(chm_spin_t* lock);
+
+/* The name before API 1.0, kept for one release (CHANGELOG.md): as
+ * chm_spin_try_lock, but a held lock gives -EBUSY. */
 int chm_spin_trylock(chm_spin_t* lock);
 
 /* Release. Errors: -EPERM not held by this RTPU (or host process);

@@ -220,7 +220,7 @@ int chm_task_status(chm_tid_t task, chm_task_status_t* out);
  * wait; -EPERM not in a task. */
 int chm_task_join(chm_tid_t task, uint64_t timeout_ns, chm_task_status_t* out);
 
-/* Number of tasks alive. Any context. */
+/* Returns the number of tasks alive. Never fails. Any context. */
 int chm_task_count(void);
 
 #ifdef __cplusplus

@@ -54,12 +54,19 @@ int chm_spin_lock(chm_spin_t* lock, uint64_t poll_interval_ns, uint64_t timeout_
     return chm::ipc::leave(lock_acquire(*a, l, a->token, poll_interval_ns, timeout_ns), "chm_spin_lock");
 }
 
-int chm_spin_trylock(chm_spin_t* lock) {
+int chm_spin_try_lock(chm_spin_t* lock) {
     Lock* l = as_lock(lock);
-    if (!l) return chm::ipc::leave(-EINVAL, "chm_spin_trylock");
+    if (!l) return chm::ipc::leave(-EINVAL, "chm_spin_try_lock");
     const Attachment* a = current();
-    if (!a) return chm::ipc::leave(-ENOTCONN, "chm_spin_trylock");
-    return chm::ipc::leave(lock_try(*a, l, a->token), "chm_spin_trylock");
+    if (!a) return chm::ipc::leave(-ENOTCONN, "chm_spin_try_lock");
+    const int r = lock_try(*a, l, a->token);
+    return chm::ipc::leave(r == -EBUSY ? -EAGAIN : r, "chm_spin_try_lock");
+}
+
+// The name before API 1.0 (kept for one release): busy is -EBUSY.
+int chm_spin_trylock(chm_spin_t* lock) {
+    const int r = chm_spin_try_lock(lock);
+    return r == -EAGAIN ? -EBUSY : r;
 }
 
 int chm_spin_unlock(chm_spin_t* lock) {
