@@ -13,12 +13,14 @@ constexpr std::uint64_t kMinRepeatNs = 50000;  // shortest interval worth repeat
 }  // namespace
 
 void timer_add_locked(TimerNode* n, std::uint64_t due) {
+    CHM_ASSERT_LOCKED();
     if (n->idx >= 0) g_k.timers.remove(n);
     n->due = due;
     g_k.timers.push(n);
 }
 
 void timer_cancel_locked(TimerNode* n) {
+    CHM_ASSERT_LOCKED();
     if (n->idx >= 0) g_k.timers.remove(n);
 }
 
@@ -30,6 +32,7 @@ std::uint64_t next_due_locked() {
 }
 
 bool timers_run_locked(std::uint64_t now) {
+    CHM_ASSERT_LOCKED();
     bool fired = false;
     while (TimerNode* n = g_k.timers.top()) {
         if (n->due > now) break;
