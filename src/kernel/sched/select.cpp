@@ -26,7 +26,7 @@ void say(const char* a, const char* b, const char* c) {
     (void)w;
 }
 
-bool valid_ready(chm_sched_task_t* h) {
+bool valid_ready_locked(chm_sched_task_t* h) {
     return tcb_view_valid(h) && tcb_of(h)->in_ready;
 }
 
@@ -97,7 +97,7 @@ Tcb* sched_pick_user_locked(std::uint64_t now) {
     if (g_k.ops->update) g_k.ops->update(g_k.ops_self, now);
     chm_sched_task_t* h = g_k.ops->pick(g_k.ops_self, now);
     if (!h) return nullptr;
-    if (!g_trusted && !valid_ready(h)) {
+    if (!g_trusted && !valid_ready_locked(h)) {
         fall_back_to_muf_locked("returned a task that is not ready");
         return sched_pick_locked(now);
     }

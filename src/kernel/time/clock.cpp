@@ -75,7 +75,7 @@ namespace {
 // later), a deadline is followed by the next cycle's (a period later).
 // Armed as the timer's interval, so the tick that releases a periodic set
 // finds the timer already set for what comes next: no system call.
-std::uint64_t next_gap_guess(std::uint64_t due) {
+std::uint64_t next_gap_guess_locked(std::uint64_t due) {
     const TimerNode* top = g_k.timers.top();
     if (!top || top->due != due || !top->owner) return 0;
     const chm_sched_task_t& s = top->owner->s;
@@ -110,7 +110,7 @@ void timer_program_locked(std::uint64_t now) {
     const bool too_late = due + kArmSlackNs < g_k.armed_at;
     const bool too_early = repeating && g_k.armed_at + kArmSlackNs < due;
     if (stale || too_late || too_early) {
-        port::timer_arm_locked(due, next_gap_guess(due));
+        port::timer_arm_locked(due, next_gap_guess_locked(due));
         g_k.armed_at = due;
     }
 }
