@@ -4,6 +4,7 @@
 // arrived while the mask was held (irq_restore's pending hook).
 #include <cerrno>
 #include <cstdlib>
+#include <sys/syscall.h>
 #include <unistd.h>
 
 #include "kernel.hpp"
@@ -14,16 +15,17 @@ namespace chm::kernel {
 Kernel g_k;
 
 // A `_locked` entry found the mask free (CHM_ASSERT_LOCKED, assertion
-// builds only): a caller broke the calling-context rule. write(2) only: it
-// may be a signal handler.
+// builds only): a caller broke the calling-context rule. The write system
+// call only: it may be a signal handler, and libc's write may be
+// interposed (io/).
 void mask_not_held(const char* fn) {
     static const char head[] = "chimera: ";
     static const char tail[] = " called without the interrupt mask held\n";
     std::size_t n = 0;
     while (fn[n]) ++n;
-    (void)!::write(2, head, sizeof head - 1);
-    (void)!::write(2, fn, n);
-    (void)!::write(2, tail, sizeof tail - 1);
+    (void)!::syscall(SYS_write, 2, head, sizeof head - 1);
+    (void)!::syscall(SYS_write, 2, fn, n);
+    (void)!::syscall(SYS_write, 2, tail, sizeof tail - 1);
     std::abort();
 }
 
