@@ -1,6 +1,7 @@
 // A private directory under /dev/shm for one multi-process test (its
 // backplane file, logs, probes): made by SetUp, emptied and removed by
-// TearDown, also when the test failed. Shared by suites ipc and rtpu.
+// TearDown, also when the test failed. Shared by suites ipc and rtpu and
+// by the bench's backplane rows (bench/ipc/rtpu.hpp: BackplaneFile).
 #pragma once
 
 #include <cstdlib>

@@ -12,6 +12,7 @@
 
 #include "../harness.hpp"
 #include "../proc.hpp"
+#include "rtpu.hpp"
 #include "chimera/bp.h"
 #include "chimera/msgq.h"
 
@@ -22,26 +23,14 @@ constexpr std::size_t kMsg = 24;
 constexpr std::uint32_t kCapacity = 4096;
 constexpr int kSelf = 1, kOther = 2;  // RTPU numbers: this process, the queue's home
 
-// A private backplane for one measurement, joined as RTPU 1, removed on
-// every path out.
+// A private backplane for one measurement (ipcb::BackplaneFile, rtpu.hpp),
+// joined as RTPU 1, removed on every path out.
 struct Backplane {
-    std::string path;
+    ipcb::BackplaneFile file{"msgq", 8, 1024 * 1024};  // room for a 4096-message queue
     Backplane() {
-        char buf[96];
-        std::snprintf(buf, sizeof buf, "/dev/shm/chimera-bench-msgq-%d.bp", int(getpid()));
-        path = buf;
-        unlink(path.c_str());
-        chm_bp_config_t c;
-        chm_bp_config_init(&c);
-        c.rtpu_slots = 8;
-        c.local_window_size = 1024 * 1024;  // room for a 4096-message queue
-        if (chm_bp_create(path.c_str(), &c) != 0) fail(std::string("chm_bp_create: ") + chm_bp_last_error());
-        if (chm_bp_join(path.c_str(), kSelf, "bench") != 0) fail(std::string("chm_bp_join: ") + chm_bp_last_error());
+        if (chm_bp_join(file.path.c_str(), kSelf, "bench") != 0) fail(std::string("chm_bp_join: ") + chm_bp_last_error());
     }
-    ~Backplane() {
-        chm_bp_leave();
-        unlink(path.c_str());
-    }
+    ~Backplane() { chm_bp_leave(); }
     chm_msgq_t* queue(const char* name, int where, std::uint32_t count) {
         chm_msgq_attr_t a;
         chm_msgq_attr_init(&a);
@@ -119,7 +108,7 @@ void msgq_wake(Session& s) {
     Backplane bp;
     chm_msgq_t* down = bp.queue("down", CHM_MSGQ_COMMON, 8);
     chm_msgq_t* up = bp.queue("up", CHM_MSGQ_COMMON, 8);
-    const std::string path = bp.path;
+    const std::string path = bp.file.path;
     Child child(cpu, [path] {
         // A forked child does not inherit the attachment: join anew.
         if (chm_bp_join(path.c_str(), kOther, "partner") != 0) return 2;

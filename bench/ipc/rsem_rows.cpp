@@ -9,6 +9,7 @@
 
 #include "../harness.hpp"
 #include "../proc.hpp"
+#include "rtpu.hpp"
 #include "chimera/bp.h"
 #include "chimera/rsem.h"
 #include "chimera/shm.h"
@@ -16,25 +17,15 @@
 namespace chm::bench {
 namespace {
 
-// A private backplane for one measurement, removed on every path out.
+// A private backplane for one measurement (ipcb::BackplaneFile, rtpu.hpp),
+// attached as a host; removed on every path out.
 struct Backplane {
-    std::string path;
+    ipcb::BackplaneFile file{"rsem", 8};
     Backplane() {
-        char buf[96];
-        std::snprintf(buf, sizeof buf, "/dev/shm/chimera-bench-%d.bp", int(getpid()));
-        path = buf;
-        unlink(path.c_str());
-        chm_bp_config_t c;
-        chm_bp_config_init(&c);
-        c.rtpu_slots = 8;
-        if (chm_bp_create(path.c_str(), &c) != 0) fail(std::string("chm_bp_create: ") + chm_bp_last_error());
-        if (chm_bp_attach_host(path.c_str(), "bench", nullptr) != 0)
+        if (chm_bp_attach_host(file.path.c_str(), "bench", nullptr) != 0)
             fail(std::string("chm_bp_attach_host: ") + chm_bp_last_error());
     }
-    ~Backplane() {
-        chm_bp_leave();
-        unlink(path.c_str());
-    }
+    ~Backplane() { chm_bp_leave(); }
     chm_rsem_t* sem(const char* name, uint32_t initial) {
         chm_rsem_t* s = nullptr;
         if (chm_rsem_create(name, CHM_SEM_COUNTING, initial, CHM_SHM_COMMON, &s) != 0)
@@ -67,7 +58,7 @@ void rsem_handoff(Session& s) {
     Backplane bp;
     chm_rsem_t* ping = bp.sem("ping", 0);
     chm_rsem_t* pong = bp.sem("pong", 0);
-    const std::string path = bp.path;
+    const std::string path = bp.file.path;
     Child child(cpu, [path] {
         // A forked child does not inherit the attachment: attach anew.
         if (chm_bp_attach_host(path.c_str(), "partner", nullptr) != 0) return 2;

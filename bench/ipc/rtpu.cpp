@@ -3,11 +3,13 @@
 
 #include <unistd.h>
 
+#include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <exception>
 #include <stdexcept>
 
+#include "../../tests/private_dir.hpp"
 #include "../kernel/kbench.hpp"
 #include "ipc/wake/wake.hpp"
 
@@ -67,10 +69,11 @@ Stats measure_part(Session& s, double fraction, const std::function<double(std::
 double child_limit(const Session& s) { return s.options().watchdog_s + 10; }
 
 BackplaneFile::BackplaneFile(const char* what, std::uint32_t slots, std::uint32_t window) {
-    char buf[128];
-    std::snprintf(buf, sizeof buf, "/dev/shm/chimera-bench-%s-%d.bp", what, int(getpid()));
-    path = buf;
-    unlink(path.c_str());
+    // The tests' private directory (tests/private_dir.hpp): whatever the
+    // backplane leaves beside its file goes with it.
+    dir = chm::test::make_private_dir((std::string("chimera-bench-") + what + "-").c_str());
+    if (dir.empty()) throw std::runtime_error(std::string("mkdtemp in /dev/shm: ") + std::strerror(errno));
+    path = dir + "/" + what + ".bp";
     chm_bp_config_t c;
     chm_bp_config_init(&c);
     c.rtpu_slots = slots;
@@ -78,7 +81,7 @@ BackplaneFile::BackplaneFile(const char* what, std::uint32_t slots, std::uint32_
     if (const int r = chm_bp_create(path.c_str(), &c)) fail_bp("chm_bp_create", r);
 }
 
-BackplaneFile::~BackplaneFile() { unlink(path.c_str()); }
+BackplaneFile::~BackplaneFile() { chm::test::remove_private_dir(dir); }
 
 Joined::Joined(const std::string& path, int slot) {
     if (const int r = chm_bp_join(path.c_str(), slot, "bench")) fail_bp("chm_bp_join", r);

@@ -30,9 +30,11 @@
 
 namespace chm::bench::ipcb {
 
-// A private backplane file, created by the constructor and unlinked by the
-// destructor.
+// A private backplane file in its own directory under /dev/shm (the tests'
+// private_dir.hpp, as suites ipc and rtpu make theirs), created by the
+// constructor; the destructor removes the directory and all in it.
 struct BackplaneFile {
+    std::string dir;
     std::string path;
     explicit BackplaneFile(const char* what, std::uint32_t slots = 10,
                            std::uint32_t window = 256 * 1024);

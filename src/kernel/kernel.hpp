@@ -15,9 +15,23 @@
 #include "chimera/task.h"
 #include "chimera/usig.h"
 #include "port.hpp"
+#include "sched/muf.hpp"
 #include "sched/readyq.hpp"
 
 namespace chm::kernel {
+
+// Builds with assertions (NDEBUG not defined: meson's debug and
+// debugoptimized buildtypes; release defines it, b_ndebug=if-release): the
+// central `_locked` entries (ready queue insert and remove, timers,
+// schedule, block) check that their caller holds the interrupt mask. One
+// load and a compare; compiled out in release.
+[[noreturn]] void mask_not_held(const char* fn);  // core/dispatch.cpp: reports, aborts
+#ifndef NDEBUG
+#define CHM_ASSERT_LOCKED() \
+    (__builtin_expect(::chm::port::irq_masked(), 1) ? (void)0 : ::chm::kernel::mask_not_held(__func__))
+#else
+#define CHM_ASSERT_LOCKED() ((void)0)
+#endif
 
 struct Tcb;
 
@@ -38,23 +52,6 @@ struct WaitQueue {
 
 enum class TaskState : std::uint8_t {
     Ready, Running, Blocked, Suspended, WaitPeriod, Paused, Ended
-};
-
-// A task's place in MUF's rate-ordered set of non-critical periodic tasks
-// (sched/muf.cpp), or the utilisation it adds to the critical tasks'.
-struct MufNode {
-    Tcb* left = nullptr;
-    Tcb* right = nullptr;
-    Tcb* parent = nullptr;
-    std::uint64_t period = 0, order = 0, util = 0, sum = 0, crit_util = 0;
-    std::uint32_t prio = 0;
-    bool in_tree = false;
-};
-struct MufSet {
-    Tcb* root = nullptr;
-    Tcb* boundary = nullptr;  // first task outside the critical prefix; nullptr: all in
-    std::uint64_t crit_util = 0, order = 0;
-    std::uint32_t rng = 2463534242u;
 };
 
 struct Tcb {
@@ -287,6 +284,19 @@ void timer_program_locked(std::uint64_t now);
 void timer_fired_locked(std::uint64_t now);
 std::uint64_t next_due_locked();
 
+// ---- deadline failures (time/deadline.cpp)
+// The deadline timer of `t`'s cycle fired: count the miss, owe it the handler.
+void deadline_missed_locked(Tcb* t, std::uint64_t now);
+// The running task `t` completed its cycle at `now` (chm_task_wait_period).
+void complete_cycle_locked(Tcb* t, std::uint64_t now);
+// In the current task's context (miss_pending): run its deadline handler,
+// or raise the error signal, and act on continue / abort-cycle / stop-RTPU.
+// Releases the mask around user code.
+void deliver_deadline_miss_locked(Tcb* cur);
+// Abort-cycle: restart the current task's entry from the top, on its own
+// stack (after the wait for its next release).
+[[noreturn]] void restart_aborted_cycle_locked(Tcb* cur);
+
 // ---- dispatching (core/dispatch.cpp)
 // Make `t` ready (not for the running task). A task that becomes ready goes
 // behind its equals; a preempted one keeps its place (keep_place).
@@ -362,11 +372,10 @@ void task_apply_timing_locked(Tcb* t);
 // The slot of an ended task goes back to the free list (after its stack,
 // and after a join for a joinable task).
 void slot_release_locked(Tcb* t);
-void task_free_stack(Tcb* t);         // after the last switch away from it: frees the slot too
+void task_free_stack_locked(Tcb* t);         // after the last switch away from it: frees the slot too
 // Entry of every task context: drops the switcher's mask, runs the entry.
 void task_start(void* tcb);
 void release_cycle_locked(Tcb* t, std::uint64_t release);
-void deadline_missed_locked(Tcb* t, std::uint64_t now);
 int stacks_reserve(std::size_t size, unsigned char** lo);
 void stacks_release(unsigned char* lo, std::size_t size, std::size_t dirty);
 bool stack_canary_ok(const Tcb* t);
@@ -390,17 +399,17 @@ inline bool sched_before_locked(Tcb* a, Tcb* b, std::uint64_t now) {
 }
 // Queue a ready task in the scheduler (in_ready is set by the caller).
 inline void sched_enqueue_locked(Tcb* t) {
+    CHM_ASSERT_LOCKED();
     if (g_k.builtin) g_k.rq.push(t, rq_key(g_k.policy, &t->s));
     else g_k.ops->enqueue(g_k.ops_self, &t->s, now_cached_locked());
 }
 inline void sched_dequeue_locked(Tcb* t) {
+    CHM_ASSERT_LOCKED();
     if (g_k.builtin) g_k.rq.remove(t);
     else g_k.ops->dequeue(g_k.ops_self, &t->s);
 }
 bool sched_reserve(std::size_t tasks);
-// MUF's admit and retire (sched/muf.cpp): keep the critical set.
-int muf_admit(void* self, chm_sched_task_t* t);
-void muf_retire(void* self, chm_sched_task_t* t);
+// MUF's admit and retire, its key and its critical set: sched/muf.hpp.
 
 // ---- wait queues (sync/waitq.cpp)
 void waitq_insert_locked(WaitQueue* q, Tcb* t);

@@ -10,6 +10,7 @@
 #include <thread>
 #include <vector>
 
+#include "kernel.hpp"
 #include "kernel_fixture.hpp"
 #include "port.hpp"
 
@@ -378,6 +379,20 @@ TEST_F(Dispatch, APortRetryFiredUnderTheMaskLeavesNoStaleTimer) {
     EXPECT_EQ(g_ticks, 5);
     EXPECT_LT(ms, 300) << "5 cycles of 20 ms took " << ms << " ms: a release was lost";
 }
+
+#ifndef NDEBUG
+// Builds with assertions: a central `_locked` entry called without the
+// interrupt mask aborts and names itself (kernel.hpp, CHM_ASSERT_LOCKED).
+TEST(LockedCheck, ATimerCallWithoutTheMaskAbortsNamingItself) {
+    ASSERT_FALSE(port::irq_masked());
+    chm::kernel::TimerNode n;  // never armed: cancelling it changes nothing
+    EXPECT_DEATH(chm::kernel::timer_cancel_locked(&n),
+                 "timer_cancel_locked called without the interrupt mask held");
+    port::irq_disable();
+    chm::kernel::timer_cancel_locked(&n);
+    port::irq_restore();
+}
+#endif
 
 }  // namespace
 }  // namespace chm::test

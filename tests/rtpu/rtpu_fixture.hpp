@@ -26,6 +26,7 @@
 #include "chimera/bp.h"
 #include "chimera/rtpu.h"
 #include "../private_dir.hpp"
+#include "lib/nap.hpp"
 
 namespace chm::test {
 
@@ -35,10 +36,7 @@ inline std::uint64_t now_ms() {
     return std::uint64_t(ts.tv_sec) * 1000u + std::uint64_t(ts.tv_nsec) / 1000000u;
 }
 
-inline void nap_ms(unsigned ms) {
-    timespec ts{time_t(ms / 1000), long(ms % 1000) * 1000000L};
-    nanosleep(&ts, nullptr);
-}
+using chm::nap_ms;  // lib/nap.hpp, shared with the library and the chimera tool
 
 inline std::string read_file(const std::string& path) {
     std::ifstream f(path);

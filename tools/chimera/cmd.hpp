@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "chimera/task.h"
+#include "lib/nap.hpp"
 
 namespace chimera_cmd {
 
@@ -42,7 +43,7 @@ void say(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
 
 // Monotonic milliseconds.
 std::uint64_t mono_ms();
-void nap_ms(unsigned ms);
+using chm::nap_ms;  // lib/nap.hpp
 
 // Log file of RTPU n of the system on `backplane`.
 std::string log_path(const std::string& backplane, int n);

@@ -34,11 +34,6 @@ std::uint64_t mono_ms() {
     return std::uint64_t(ts.tv_sec) * 1000u + std::uint64_t(ts.tv_nsec) / 1000000u;
 }
 
-void nap_ms(unsigned ms) {
-    timespec ts{time_t(ms / 1000), long(ms % 1000) * 1000000L};
-    nanosleep(&ts, nullptr);
-}
-
 std::string log_path(const std::string& backplane, int n) {
     if (n == 0) return backplane + ".host.log";  // the host server's
     return backplane + ".rtpu" + std::to_string(n) + ".log";

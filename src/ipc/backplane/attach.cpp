@@ -15,6 +15,7 @@
 
 #include "chimera/bp.h"
 #include "ipc/backplane/backplane.hpp"
+#include "lib/nap.hpp"
 
 namespace chm::bp {
 
@@ -27,11 +28,6 @@ std::atomic<bool> g_attached{false};
 std::atomic<std::uint32_t> g_attach_count{0};  // attachments made so far (attach_count)
 pthread_mutex_t g_mu = PTHREAD_MUTEX_INITIALIZER;
 pthread_once_t g_once = PTHREAD_ONCE_INIT;
-
-void nap_ms(unsigned ms) {
-    timespec ts{0, long(ms) * 1000000L};
-    ::nanosleep(&ts, nullptr);
-}
 
 // fork() pauses the monitor thread: the process is single-threaded at the
 // fork (no recovery is in flight across it, and qemu-user 7.2 cannot
@@ -234,6 +230,20 @@ int attach(const char* path, int want, SlotKind kind, const char* name, int* slo
 }  // namespace
 
 Attachment* current() { return g_attached.load(std::memory_order_acquire) ? &g_att : nullptr; }
+
+Attachment* need_attachment(const char* fn) {
+    Attachment* a = current();
+    if (!a && fn) set_error("%s: not attached to a backplane (chm_bp_join / chm_bp_attach_host first)", fn);
+    else if (!a) set_error("not attached to a backplane (chm_bp_join / chm_bp_attach_host first)");
+    return a;
+}
+
+int lock_registry(Attachment* a, const char* fn) {
+    const int r = registry_lock(*a, a->token);
+    if (r && fn) set_error("%s: backplane %s: registry lock: a live holder kept it past the bound", fn, a->path);
+    else if (r) set_error("backplane %s: registry lock: a live holder kept it past the bound", a->path);
+    return r;
+}
 
 std::uint32_t attach_count() { return g_attach_count.load(std::memory_order_relaxed); }
 

@@ -107,6 +107,13 @@ struct Attachment : View {
 // The attachment, or nullptr when this process is not attached. Other IPC
 // subsystems use this; it stays valid until chm_bp_leave.
 Attachment* current();
+// current(), or nullptr with chm_bp_last_error() saying "<fn>: not attached
+// to a backplane (chm_bp_join / chm_bp_attach_host first)" (no "<fn>: "
+// when fn is nullptr). The public calls' first step (shm, msgq, svar).
+Attachment* need_attachment(const char* fn = nullptr);
+// registry_lock(*a, a->token), with chm_bp_last_error() set, prefixed as
+// above, when a live holder kept it past the bound.
+int lock_registry(Attachment* a, const char* fn = nullptr);
 // How many attachments this process has made: process memory tied to one
 // attachment (a segment's address) is stale when this has moved on.
 std::uint32_t attach_count();

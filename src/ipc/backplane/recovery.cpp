@@ -20,6 +20,7 @@
 #include <unistd.h>
 
 #include "ipc/backplane/backplane.hpp"
+#include "lib/nap.hpp"
 #include "ipc/xmail/xmail.hpp"
 
 namespace chm::bp {
@@ -58,11 +59,6 @@ bool adopt(Lock* l, std::uint32_t d, std::uint32_t rt) {
     std::uint32_t t = l->token.load(std::memory_order_acquire);
     if (t == rt) return true;  // a dead recoverer's, now ours
     return t == d && l->token.compare_exchange_strong(t, rt, std::memory_order_acquire, R);
-}
-
-void nap_ms(unsigned ms) {
-    timespec ts{0, long(ms) * 1000000L};
-    ::nanosleep(&ts, nullptr);
 }
 
 void do_recover(const View& v, std::uint32_t slot, std::uint32_t gen) {

@@ -21,18 +21,6 @@ namespace {
 
 constexpr auto R = std::memory_order_relaxed;
 
-Attachment* need_attachment(const char* fn) {
-    Attachment* a = current();
-    if (!a) set_error("%s: not attached to a backplane (chm_bp_join / chm_bp_attach_host first)", fn);
-    return a;
-}
-
-int lock_registry(Attachment* a, const char* fn) {
-    const int r = registry_lock(*a, a->token);
-    if (r) set_error("%s: backplane %s: registry lock: a live holder kept it past the bound", fn, a->path);
-    return r;
-}
-
 QueueHeader* queue_of(const Attachment* a, std::uint32_t index) {
     return a->at<QueueHeader>(a->entry(index)->offset.load(R));
 }

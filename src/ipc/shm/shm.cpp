@@ -14,22 +14,6 @@
 
 using namespace chm::bp;
 
-namespace {
-
-Attachment* need_attachment() {
-    Attachment* a = current();
-    if (!a) set_error("not attached to a backplane (chm_bp_join / chm_bp_attach_host first)");
-    return a;
-}
-
-int lock_registry(Attachment* a) {
-    const int r = registry_lock(*a, a->token);
-    if (r) set_error("backplane %s: registry lock: a live holder kept it past the bound", a->path);
-    return r;
-}
-
-}  // namespace
-
 extern "C" {
 
 static int shm_create_impl(const char* name, size_t size, int where, void** out) {

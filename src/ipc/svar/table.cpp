@@ -124,11 +124,8 @@ int find(const Table& t, const char* name, EntryView* out, char* why, std::size_
 }
 
 int open_table(bool create, Table* out) {
-    bp::Attachment* a = bp::current();
-    if (!a) {
-        bp::set_error("not attached to a backplane (chm_bp_join / chm_bp_attach_host first)");
-        return -ENOTCONN;
-    }
+    bp::Attachment* a = bp::need_attachment();
+    if (!a) return -ENOTCONN;
     bp::EntryInfo info{};
     int r = bp::registry_lookup(*a, kTableName, bp::kKindStateVars, &info);
     if (r == -ENOENT && create) {

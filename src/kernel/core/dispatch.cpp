@@ -3,14 +3,31 @@
 // redirected through the port's preemption trampoline, and a tick that
 // arrived while the mask was held (irq_restore's pending hook).
 #include <cerrno>
+#include <cstdlib>
+#include <sys/syscall.h>
+#include <unistd.h>
 
-#include "err/err_internal.hpp"
 #include "kernel.hpp"
 #include "sync/remote_wait.hpp"
 
 namespace chm::kernel {
 
 Kernel g_k;
+
+// A `_locked` entry found the mask free (CHM_ASSERT_LOCKED, assertion
+// builds only): a caller broke the calling-context rule. The write system
+// call only: it may be a signal handler, and libc's write may be
+// interposed (io/).
+void mask_not_held(const char* fn) {
+    static const char head[] = "chimera: ";
+    static const char tail[] = " called without the interrupt mask held\n";
+    std::size_t n = 0;
+    while (fn[n]) ++n;
+    (void)!::syscall(SYS_write, 2, head, sizeof head - 1);
+    (void)!::syscall(SYS_write, 2, fn, n);
+    (void)!::syscall(SYS_write, 2, tail, sizeof tail - 1);
+    std::abort();
+}
 
 void charge_current_locked(std::uint64_t now) {
     Tcb* cur = g_k.current;
@@ -134,7 +151,7 @@ __attribute__((noinline)) void switch_to_locked(Tcb* next, std::uint64_t now) {
     // Back in `prev`'s context.
     if (Tcb* z = g_k.zombie) [[unlikely]] {  // its stack is no longer in use
         g_k.zombie = nullptr;
-        task_free_stack(z);
+        task_free_stack_locked(z);
     }
     if (g_k.current) *err = g_k.current->saved_errno;
 }
@@ -172,6 +189,7 @@ inline std::uint64_t schedule_now_locked() {
 }
 
 void schedule_locked() {
+    CHM_ASSERT_LOCKED();
     // A priority changed without a switch (set, lent, handler) is published too.
     if (port::g_db_publishes) publish_running_locked();
     g_k.decision_owed = false;
@@ -274,6 +292,7 @@ extern "C" void chm_task_yield(void) { chm::port::call_indirect_return(task_yiel
 namespace chm::kernel {
 
 int block_current_locked() {
+    CHM_ASSERT_LOCKED();
     Tcb* cur = g_k.current;
     if (g_k.in_irq) {
         // An interrupt handler may not wait: undo the block, refuse.
@@ -292,32 +311,7 @@ void deliver_pending_slow_locked() {
         Tcb* cur = g_k.current;
         if (!cur) return;
         if (cur->miss_pending) {
-            cur->miss_pending = false;
-            chm_deadline_info_t info{chm_tid_t(cur->index | (std::uint32_t(cur->gen) << 16)),
-                                     cur->missed_cycle, cur->missed_deadline, now_locked(),
-                                     cur->misses, cur->misses_unhandled};
-            cur->misses_unhandled = 0;
-            chm_deadline_action act = CHM_DL_CONTINUE;
-            if (cur->on_deadline) {
-                const int own_prio = cur->s.priority;
-                if (cur->handler_priority) cur->s.priority = cur->handler_priority;
-                port::irq_restore();
-                act = cur->on_deadline(&info, cur->on_deadline_arg);
-                port::irq_disable();
-                cur->s.priority = own_prio;
-            } else {
-                err_deadline_missed_locked(info);  // a kernel error signal
-            }
-            if (act == CHM_DL_STOP_RTPU) {
-                port::irq_restore();
-                chm_kernel_stop(0);
-            }
-            if (act == CHM_DL_ABORT_CYCLE) {
-                cur->abort_cycle = true;
-                port::irq_restore();
-                chm_task_wait_period();  // restarts the entry at the next release
-                port::irq_disable();
-            }
+            deliver_deadline_miss_locked(cur);  // time/deadline.cpp
             continue;
         }
         const std::uint32_t sigs = cur->sig_pending & ~cur->sig_blocked;
@@ -354,7 +348,7 @@ void preempted_from_trampoline() {
 
 // A tick, or doorbell vectors left behind a switch, that arrived while the
 // mask was held; runs with the mask held.
-void pending_tick(std::uint32_t why) {
+void pending_tick_locked(std::uint32_t why) {
     const std::uint64_t now = now_locked();
     if (why & port::kPendingTick) {
         // It may be the port's own retry (a deferred preemption) that
@@ -387,7 +381,7 @@ bool tick_from_signal(std::uint64_t now) {
 }  // namespace
 
 void dispatch_install_hooks() {
-    port::irq_set_pending_hook(pending_tick);
+    port::irq_set_pending_hook(pending_tick_locked);
     port::chm_port_preempt_hook = preempted_from_trampoline;
 }
 

@@ -197,7 +197,7 @@ void chm_kernel_fini(void) {
         Tcb* t = &g_k.tcbs[i];
         if (!t->used) continue;
         if (t->state != TaskState::Ended) task_end_locked(t);
-        if (t->stack_lo) task_free_stack(t);
+        if (t->stack_lo) task_free_stack_locked(t);
     }
     g_k.zombie = nullptr;
     port::irq_restore();

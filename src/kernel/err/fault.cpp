@@ -7,7 +7,6 @@
 // exhausted, so the entry runs on one of a few fault stacks instead and
 // the task can only be aborted. Anything else fail-stops the RTPU.
 #include <cerrno>
-#include <csignal>
 #include <cstring>
 #include <sys/mman.h>
 #include <sys/syscall.h>
@@ -53,10 +52,10 @@ struct Pending {
 Pending g_pending;
 
 int cpu_code(const port::FaultInfo& f) {
-    switch (f.signo) {
-    case SIGBUS: return CHM_ECPU_BUS;
-    case SIGFPE: return CHM_ECPU_FPE;
-    case SIGILL: return CHM_ECPU_ILL;
+    switch (f.kind) {
+    case port::FaultKind::Bus: return CHM_ECPU_BUS;
+    case port::FaultKind::Arithmetic: return CHM_ECPU_FPE;
+    case port::FaultKind::Illegal: return CHM_ECPU_ILL;
     default: return CHM_ECPU_SEGV;
     }
 }
@@ -68,29 +67,6 @@ const char* cpu_message(int code) {
     case CHM_ECPU_ILL: return "illegal instruction";
     case CHM_ECPU_STACK: return "stack overflow";
     default: return "segmentation fault";
-    }
-}
-
-const char* cpu_detail(const port::FaultInfo& f) {
-    if (f.code <= 0) return "signal sent by a process";
-    switch (f.signo) {
-    case SIGSEGV:
-        return f.code == SEGV_MAPERR ? "address not mapped" : f.code == SEGV_ACCERR ? "access not permitted" : nullptr;
-    case SIGBUS:
-        return f.code == BUS_ADRALN ? "misaligned address" : f.code == BUS_ADRERR ? "no such physical address" : nullptr;
-    case SIGFPE:
-        switch (f.code) {
-        case FPE_INTDIV: return "integer division by zero";
-        case FPE_INTOVF: return "integer overflow";
-        case FPE_FLTDIV: return "floating-point division by zero";
-        case FPE_FLTOVF: return "floating-point overflow";
-        case FPE_FLTINV: return "invalid floating-point operation";
-        default: return nullptr;
-        }
-    case SIGILL:
-        return f.code == ILL_ILLOPC ? "illegal opcode" : f.code == ILL_PRVOPC ? "privileged opcode" : nullptr;
-    default:
-        return nullptr;
     }
 }
 
@@ -127,7 +103,7 @@ void fault_entry() {
     info.code = p.code;
     info.detail = p.f.no_room                 ? "preempted with no room left on its stack"
                   : p.code == CHM_ECPU_STACK ? "the task overflowed its stack"
-                                             : cpu_detail(p.f);
+                                             : p.f.detail;
     info.flags = CHM_ERR_FATAL;
     info.addr = p.f.addr;
     info.pc = p.f.pc;
@@ -144,7 +120,7 @@ void on_fault(const port::FaultInfo& f, void* ucontext) {
     if (cur->err && cur->err->depth > 0) fail_stop(f, code, cur, "inside an error handler");
     const auto lo = reinterpret_cast<std::uintptr_t>(cur->stack_lo);
     const std::uintptr_t hi = lo + cur->stack_size;
-    const bool guard_hit = f.signo == SIGSEGV && f.addr < lo && f.addr + g_page >= lo;
+    const bool guard_hit = f.kind == port::FaultKind::Access && f.addr < lo && f.addr + g_page >= lo;
     if (guard_hit || f.no_room || f.sp < lo || f.sp > hi) code = CHM_ECPU_STACK;
     std::uintptr_t sp = 0;  // 0: on the task's own stack, below the fault
     bool on_fault_stack = false;

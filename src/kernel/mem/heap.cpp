@@ -22,6 +22,7 @@
 #include <unistd.h>
 
 #include "kernel/mem/tlsf_block.hpp"
+#include "port.hpp"  // relax(): the port's spin-wait hint
 
 #ifndef MADV_POPULATE_WRITE
 #define MADV_POPULATE_WRITE 23  // Linux 5.14, same value on every architecture
@@ -30,16 +31,6 @@
 namespace chm::mem {
 
 namespace {
-
-CHM_MEM_TEXT inline void cpu_relax() {
-#if defined(__x86_64__) || defined(__i386__)
-    __builtin_ia32_pause();
-#elif defined(__aarch64__)
-    __asm__ __volatile__("yield" ::: "memory");
-#else
-    __asm__ __volatile__("" ::: "memory");
-#endif
-}
 
 // Drepper's three-state futex mutex (0 free, 1 held, 2 held with sleepers),
 // with a short spin first: heap critical sections are a few hundred
@@ -53,7 +44,7 @@ public:
         if (cas(expected, 1))
             return;
         for (int i = 0; i < kSpins; ++i) {
-            cpu_relax();
+            chm::port::relax();  // always inlined: stays in chm_mem_text
             expected = 0;
             if (__atomic_load_n(&word_, __ATOMIC_RELAXED) == 0 && cas(expected, 1))
                 return;

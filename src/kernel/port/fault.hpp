@@ -13,15 +13,27 @@
 
 namespace chm::port {
 
+// What the processor reported (POSIX: SIGSEGV, SIGBUS, SIGFPE, SIGILL; the
+// signal numbers stay in posix/fault.cpp).
+enum class FaultKind : std::uint8_t {
+    Access,      // a bad memory access (SIGSEGV)
+    Bus,         // a bus error (SIGBUS)
+    Arithmetic,  // integer division by zero, an FP trap (SIGFPE)
+    Illegal,     // an illegal instruction (SIGILL)
+};
+
 struct FaultInfo {
-    int signo;            // SIGSEGV, SIGBUS, SIGFPE, SIGILL
-    int code;             // si_code (> 0: raised by the processor)
+    FaultKind kind;
+    // The port's words for the cause ("address not mapped", ...), "signal
+    // sent by a process" when the processor did not raise it, nullptr when
+    // the port has none.
+    const char* detail;
     std::uintptr_t addr;  // si_addr: the faulting address (or instruction)
     std::uintptr_t pc;    // the interrupted program counter
     std::uintptr_t sp;    // the interrupted stack pointer
     // Not a processor fault: the timer found no room below sp for the
-    // preemption trampoline's frame (fault_no_room_from_signal). signo is
-    // SIGSEGV, code 0, addr the lowest byte the frame would have used.
+    // preemption trampoline's frame (fault_no_room_from_signal). kind is
+    // Access, addr the lowest byte the frame would have used.
     bool no_room = false;
 };
 

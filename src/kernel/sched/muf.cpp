@@ -7,7 +7,8 @@
 // every task per periodic spawn: 344 us with 10,000 tasks). The non-critical
 // periodic tasks sit in a treap ordered by rate with subtree utilisation
 // sums; the prefix ends at the first task whose running sum exceeds the
-// budget 1 - U(critical), found in one descent.
+// budget 1 - U(critical), found in one descent. MUF's ordering key and
+// this set's data structures are in sched/muf.hpp.
 #include "kernel.hpp"
 
 namespace chm::kernel {

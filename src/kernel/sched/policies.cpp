@@ -1,8 +1,9 @@
 // The built-in policies' operations tables: each is one key over the same
 // ready heap (Zephyr's lesson: the policy is a key, not a rewrite; the keys
-// are in sched/readyq.hpp, MUF's critical set in sched/muf.cpp). RM, EDF,
-// MLF, MUF and fixed priority share enqueue, dequeue and pick. The kernel
-// calls the same code directly when a built-in policy is in force.
+// are in sched/readyq.hpp, MUF's beside its critical set in sched/muf.hpp
+// and sched/muf.cpp). RM, EDF, MLF, MUF and fixed priority share enqueue,
+// dequeue and pick. The kernel calls the same code directly when a
+// built-in policy is in force.
 #include <cstdint>
 #include <cstdlib>
 

@@ -1,4 +1,5 @@
-// The ready queue of the built-in policies and their ordering keys.
+// The ready queue of the built-in policies and their ordering keys (MUF's
+// own key, beside its critical set, is in sched/muf.hpp).
 // Included by kernel.hpp (after Tcb); nothing here is public API.
 //
 // Why a key copied into the heap: a waiting task's order never changes
@@ -15,6 +16,7 @@
 
 #include "chimera/kernel.h"
 #include "chimera/sched.h"
+#include "sched/muf.hpp"
 
 namespace chm::kernel {
 
@@ -34,7 +36,6 @@ inline bool rq_key_less(const RqKey& a, const RqKey& b) {
 }
 
 inline constexpr std::uint64_t kKeyNever = UINT64_MAX >> 1;  // 63 bits; MUF uses the top bit
-inline constexpr std::int32_t kInCriticalSet = 1;             // chm_sched_task_t::flags (MUF)
 
 inline std::uint64_t key63(std::uint64_t v) { return v < kKeyNever ? v : kKeyNever; }
 
@@ -52,8 +53,8 @@ inline std::uint64_t major_key(const chm_sched_task_t* t) {
     if constexpr (P == CHM_SCHED_RM) return key63(t->period_ns ? t->period_ns : UINT64_MAX);
     else if constexpr (P == CHM_SCHED_EDF) return key63(t->abs_deadline_ns);
     else if constexpr (P == CHM_SCHED_MLF) return key63(lax_key(t));
-    else if constexpr (P == CHM_SCHED_MUF)  // the critical set first, then laxity
-        return ((t->flags & kInCriticalSet) ? 0 : (1ull << 63)) | key63(lax_key(t));
+    else if constexpr (P == CHM_SCHED_MUF)  // the critical set first, then laxity (sched/muf.hpp)
+        return muf_major_key(t, key63(lax_key(t)));
     else return 0;  // FIXED: priority only
 }
 

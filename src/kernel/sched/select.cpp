@@ -26,7 +26,7 @@ void say(const char* a, const char* b, const char* c) {
     (void)w;
 }
 
-bool valid_ready(chm_sched_task_t* h) {
+bool valid_ready_locked(chm_sched_task_t* h) {
     return tcb_view_valid(h) && tcb_of(h)->in_ready;
 }
 
@@ -36,7 +36,7 @@ void append(char* dst, std::size_t cap, const char* src) {
     dst[n] = 0;
 }
 
-void fall_back_to_muf(const char* why) {
+void fall_back_to_muf_locked(const char* why) {
     const char* name = g_k.ops->name ? g_k.ops->name : "(unnamed)";
     g_reason[0] = 0;  // no snprintf: this may run in the signal handler
     append(g_reason, sizeof g_reason, "user scheduler '");
@@ -97,8 +97,8 @@ Tcb* sched_pick_user_locked(std::uint64_t now) {
     if (g_k.ops->update) g_k.ops->update(g_k.ops_self, now);
     chm_sched_task_t* h = g_k.ops->pick(g_k.ops_self, now);
     if (!h) return nullptr;
-    if (!g_trusted && !valid_ready(h)) {
-        fall_back_to_muf("returned a task that is not ready");
+    if (!g_trusted && !valid_ready_locked(h)) {
+        fall_back_to_muf_locked("returned a task that is not ready");
         return sched_pick_locked(now);
     }
     return tcb_of(h);

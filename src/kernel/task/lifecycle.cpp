@@ -77,7 +77,7 @@ void task_run_end_hooks(Tcb* t) {
     cur->exit_status = status;
     task_end_locked(cur);
     if (g_k.zombie) {  // not yet reaped (we ran without returning from a switch)
-        task_free_stack(g_k.zombie);
+        task_free_stack_locked(g_k.zombie);
     }
     g_k.zombie = cur;
     schedule_locked();

@@ -110,7 +110,7 @@ void task_start(void* p) {
     errno = 0;
     if (Tcb* z = g_k.zombie; z && z != t) {
         g_k.zombie = nullptr;
-        task_free_stack(z);
+        task_free_stack_locked(z);
     }
     // The context that switched here held the mask (every switch happens at
     // nest == 1); it is ours to release, then take what is owed to us.
@@ -136,15 +136,6 @@ void release_cycle_locked(Tcb* t, std::uint64_t release) {
     if (g_k.ops->release) g_k.ops->release(g_k.ops_self, &t->s, release);
 }
 
-void deadline_missed_locked(Tcb* t, std::uint64_t now) {
-    ++t->misses;
-    ++t->misses_unhandled;
-    t->missed_cycle = t->cycle;
-    t->missed_deadline = t->s.abs_deadline_ns;
-    if (now - t->s.abs_deadline_ns > t->worst_lateness) t->worst_lateness = now - t->s.abs_deadline_ns;
-    t->miss_pending = true;  // without a handler: a kernel error signal (err/)
-}
-
 void task_end_locked(Tcb* t) {
     err_task_ended_locked(t);
     unready_locked(t);
@@ -162,7 +153,7 @@ void task_end_locked(Tcb* t) {
     }
 }
 
-void task_free_stack(Tcb* t) {
+void task_free_stack_locked(Tcb* t) {
     t->final_high_water = stack_dirty_estimate(t);
     stacks_release(t->stack_lo, t->stack_size, t->final_high_water);
     t->stack_lo = nullptr;
@@ -273,7 +264,7 @@ int chm_task_destroy(chm_tid_t id) {
         t->end_reason = CHM_TASK_DESTROYED;
         const bool joined = t->joiners.head != nullptr;
         task_end_locked(t);
-        task_free_stack(t);
+        task_free_stack_locked(t);
         if (joined) reschedule_locked();  // its joiner may be more urgent than we are
     }
     return 0;

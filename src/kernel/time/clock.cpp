@@ -13,12 +13,14 @@ constexpr std::uint64_t kMinRepeatNs = 50000;  // shortest interval worth repeat
 }  // namespace
 
 void timer_add_locked(TimerNode* n, std::uint64_t due) {
+    CHM_ASSERT_LOCKED();
     if (n->idx >= 0) g_k.timers.remove(n);
     n->due = due;
     g_k.timers.push(n);
 }
 
 void timer_cancel_locked(TimerNode* n) {
+    CHM_ASSERT_LOCKED();
     if (n->idx >= 0) g_k.timers.remove(n);
 }
 
@@ -30,6 +32,7 @@ std::uint64_t next_due_locked() {
 }
 
 bool timers_run_locked(std::uint64_t now) {
+    CHM_ASSERT_LOCKED();
     bool fired = false;
     while (TimerNode* n = g_k.timers.top()) {
         if (n->due > now) break;
@@ -72,7 +75,7 @@ namespace {
 // later), a deadline is followed by the next cycle's (a period later).
 // Armed as the timer's interval, so the tick that releases a periodic set
 // finds the timer already set for what comes next: no system call.
-std::uint64_t next_gap_guess(std::uint64_t due) {
+std::uint64_t next_gap_guess_locked(std::uint64_t due) {
     const TimerNode* top = g_k.timers.top();
     if (!top || top->due != due || !top->owner) return 0;
     const chm_sched_task_t& s = top->owner->s;
@@ -107,7 +110,7 @@ void timer_program_locked(std::uint64_t now) {
     const bool too_late = due + kArmSlackNs < g_k.armed_at;
     const bool too_early = repeating && g_k.armed_at + kArmSlackNs < due;
     if (stale || too_late || too_early) {
-        port::timer_arm_locked(due, next_gap_guess(due));
+        port::timer_arm_locked(due, next_gap_guess_locked(due));
         g_k.armed_at = due;
     }
 }

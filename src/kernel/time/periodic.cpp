@@ -1,5 +1,6 @@
 // Task timing: pause until a restart time, periodic cycles on an
-// absolute grid (no drift), and locking a task into the CPU.
+// absolute grid (no drift), and locking a task into the CPU. What happens
+// when a cycle misses its deadline is in time/deadline.cpp.
 #include <cerrno>
 
 #include "kernel.hpp"
@@ -22,17 +23,6 @@ int sleep_current_locked(TaskState state, std::uint64_t until, TimerKind kind) {
     const int r = block_current_locked();
     deliver_pending_locked();
     return r;
-}
-
-void complete_cycle_locked(Tcb* t, std::uint64_t now) {
-    ++t->cycles_done;
-    if (t->s.cycle_cpu_ns > t->worst_cycle_cpu) t->worst_cycle_cpu = t->s.cycle_cpu_ns;
-    if (t->dl.idx >= 0) {
-        timer_cancel_locked(&t->dl);  // finished in time
-    } else if (now > t->s.abs_deadline_ns && now - t->s.abs_deadline_ns > t->worst_lateness) {
-        t->worst_lateness = now - t->s.abs_deadline_ns;
-    }
-    t->awaiting_release = true;
 }
 
 }  // namespace
@@ -78,14 +68,7 @@ int chm_task_wait_period(void) {
     } else {
         r = sleep_current_locked(TaskState::WaitPeriod, next, TimerKind::Release);
     }
-    if (cur->abort_cycle && r == 0) {
-        // Restart the entry from the top, on this same stack: we are deep
-        // below the frames context_init rewrites, and never return to them.
-        cur->abort_cycle = false;
-        port::context_init(&cur->ctx, cur->stack_lo, cur->stack_size, task_start, cur);
-        void* discard;
-        chm_port_switch(&discard, cur->ctx.sp);
-    }
+    if (cur->abort_cycle && r == 0) restart_aborted_cycle_locked(cur);  // time/deadline.cpp
     port::irq_restore();
     return r;
 }

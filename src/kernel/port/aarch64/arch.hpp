@@ -21,7 +21,9 @@ inline void tas_clear(volatile std::uint8_t* b) {
     __atomic_store_n(b, std::uint8_t{0}, __ATOMIC_RELEASE);
 }
 
-inline void relax() { __asm__ __volatile__("yield" ::: "memory"); }
+// Always inlined: the allocator spins with it, and none of its code may
+// lie outside its own section (mem/mem_text.hpp), even at -O0.
+__attribute__((always_inline)) inline void relax() { __asm__ __volatile__("yield" ::: "memory"); }
 
 inline constexpr const char* kArchName = "aarch64";
 // AAPCS64: sp is 16-byte aligned at every public interface, and a call

@@ -38,7 +38,9 @@ inline void tas_clear(volatile std::uint8_t* b) {
 
 // The 68k has no spin-wait hint; nop also synchronises the pipeline on the
 // 68040/060.
-inline void relax() { __asm__ __volatile__("nop" ::: "memory"); }
+// Always inlined: the allocator spins with it, and none of its code may
+// lie outside its own section (mem/mem_text.hpp), even at -O0.
+__attribute__((always_inline)) inline void relax() { __asm__ __volatile__("nop" ::: "memory"); }
 
 inline constexpr const char* kArchName = "m68k";
 // The m68k SVR4/Linux ABI keeps the stack 4-byte aligned at calls (GCC

@@ -29,6 +29,39 @@ int index_of(int sig) {
     return 0;
 }
 
+FaultKind kind_of(int sig) {
+    switch (sig) {
+    case SIGBUS: return FaultKind::Bus;
+    case SIGFPE: return FaultKind::Arithmetic;
+    case SIGILL: return FaultKind::Illegal;
+    default: return FaultKind::Access;
+    }
+}
+
+// What si_code says about the cause (FaultInfo::detail).
+const char* detail_of(int sig, int code) {
+    if (code <= 0) return "signal sent by a process";
+    switch (sig) {
+    case SIGSEGV:
+        return code == SEGV_MAPERR ? "address not mapped" : code == SEGV_ACCERR ? "access not permitted" : nullptr;
+    case SIGBUS:
+        return code == BUS_ADRALN ? "misaligned address" : code == BUS_ADRERR ? "no such physical address" : nullptr;
+    case SIGFPE:
+        switch (code) {
+        case FPE_INTDIV: return "integer division by zero";
+        case FPE_INTOVF: return "integer overflow";
+        case FPE_FLTDIV: return "floating-point division by zero";
+        case FPE_FLTOVF: return "floating-point overflow";
+        case FPE_FLTINV: return "invalid floating-point operation";
+        default: return nullptr;
+        }
+    case SIGILL:
+        return code == ILL_ILLOPC ? "illegal opcode" : code == ILL_PRVOPC ? "privileged opcode" : nullptr;
+    default:
+        return nullptr;
+    }
+}
+
 // A fault that is not ours: what would have happened without us.
 void chain(int sig, siginfo_t* si, void* uc) {
     const struct sigaction& old = g_old[index_of(sig)];
@@ -52,7 +85,7 @@ void on_fault(int sig, siginfo_t* si, void* uc) {
         return;
     }
     const int saved_errno = errno;
-    FaultInfo f{sig, si->si_code, reinterpret_cast<std::uintptr_t>(si->si_addr),
+    FaultInfo f{kind_of(sig), detail_of(sig, si->si_code), reinterpret_cast<std::uintptr_t>(si->si_addr),
                 interrupted_pc_from_signal(uc), interrupted_sp_from_signal(uc)};
     g_handler(f, uc);
     errno = saved_errno;
@@ -64,7 +97,7 @@ bool on_fault_thread() { return t_fault_thread; }
 
 bool fault_no_room_from_signal(void* ucontext, std::uintptr_t addr) {
     if (!t_fault_thread || !g_handler) return false;
-    FaultInfo f{SIGSEGV, 0, addr, interrupted_pc_from_signal(ucontext),
+    FaultInfo f{FaultKind::Access, detail_of(SIGSEGV, 0), addr, interrupted_pc_from_signal(ucontext),
                 interrupted_sp_from_signal(ucontext), true};
     g_handler(f, ucontext);
     return true;

@@ -71,7 +71,9 @@ inline void tas_clear(volatile std::uint8_t* b) { (void)b; }
 
 // Tell the processor the caller is spinning (x86 pause, Arm yield, a nop
 // where there is no hint). No ordering, no side effect; any context.
-inline void relax() {}
+// Always inlined: the allocator spins with it, and none of its code may
+// lie outside its own section (mem/mem_text.hpp), even at -O0.
+__attribute__((always_inline)) inline void relax() {}
 
 // Name of the target, printed by tests and the kernel's banner.
 inline constexpr const char* kArchName = "template";

@@ -21,7 +21,9 @@ inline void tas_clear(volatile std::uint8_t* b) {
     __atomic_store_n(b, 0, __ATOMIC_RELEASE);
 }
 
-inline void relax() { __builtin_ia32_pause(); }
+// Always inlined: the allocator spins with it, and none of its code may
+// lie outside its own section (mem/mem_text.hpp), even at -O0.
+__attribute__((always_inline)) inline void relax() { __builtin_ia32_pause(); }
 
 inline constexpr const char* kArchName = "x86_64";
 // The ABI's stack alignment at a call instruction.

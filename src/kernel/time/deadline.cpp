@@ -1,0 +1,80 @@
+// Deadline failures (Chimera II's deadline-failure handling), in one place:
+//  * detection: each cycle's deadline timer, armed by release_cycle_locked
+//    (task/task.cpp) at deadline + 1 ns and fired by timers_run_locked
+//    (time/clock.cpp), calls deadline_missed_locked: the miss is counted
+//    (misses, misses_unhandled, worst lateness) and owed to the task;
+//  * a cycle that completes (complete_cycle_locked, from
+//    chm_task_wait_period in time/periodic.cpp) cancels its deadline timer,
+//    or records how late it was;
+//  * the handler call: deliver_deadline_miss_locked runs in the failing
+//    task's own context (deliver_pending_slow_locked, core/dispatch.cpp)
+//    with the count of misses since its last call (`unhandled`), and acts
+//    on the handler's answer: continue, abort-cycle or stop-RTPU. Without a
+//    handler the miss becomes a kernel error signal (err/err.cpp);
+//  * abort-cycle: restart_aborted_cycle_locked restarts the task's entry
+//    from the top at its next release.
+#include "err/err_internal.hpp"
+#include "kernel.hpp"
+
+namespace chm::kernel {
+
+void deadline_missed_locked(Tcb* t, std::uint64_t now) {
+    ++t->misses;
+    ++t->misses_unhandled;
+    t->missed_cycle = t->cycle;
+    t->missed_deadline = t->s.abs_deadline_ns;
+    if (now - t->s.abs_deadline_ns > t->worst_lateness) t->worst_lateness = now - t->s.abs_deadline_ns;
+    t->miss_pending = true;  // without a handler: a kernel error signal (err/)
+}
+
+void complete_cycle_locked(Tcb* t, std::uint64_t now) {
+    ++t->cycles_done;
+    if (t->s.cycle_cpu_ns > t->worst_cycle_cpu) t->worst_cycle_cpu = t->s.cycle_cpu_ns;
+    if (t->dl.idx >= 0) {
+        timer_cancel_locked(&t->dl);  // finished in time
+    } else if (now > t->s.abs_deadline_ns && now - t->s.abs_deadline_ns > t->worst_lateness) {
+        t->worst_lateness = now - t->s.abs_deadline_ns;
+    }
+    t->awaiting_release = true;
+}
+
+void deliver_deadline_miss_locked(Tcb* cur) {
+    cur->miss_pending = false;
+    chm_deadline_info_t info{chm_tid_t(cur->index | (std::uint32_t(cur->gen) << 16)),
+                             cur->missed_cycle, cur->missed_deadline, now_locked(),
+                             cur->misses, cur->misses_unhandled};
+    cur->misses_unhandled = 0;
+    chm_deadline_action act = CHM_DL_CONTINUE;
+    if (cur->on_deadline) {
+        const int own_prio = cur->s.priority;
+        if (cur->handler_priority) cur->s.priority = cur->handler_priority;
+        port::irq_restore();
+        act = cur->on_deadline(&info, cur->on_deadline_arg);
+        port::irq_disable();
+        cur->s.priority = own_prio;
+    } else {
+        err_deadline_missed_locked(info);  // a kernel error signal
+    }
+    if (act == CHM_DL_STOP_RTPU) {
+        port::irq_restore();
+        chm_kernel_stop(0);
+    }
+    if (act == CHM_DL_ABORT_CYCLE) {
+        cur->abort_cycle = true;
+        port::irq_restore();
+        chm_task_wait_period();  // restarts the entry at the next release
+        port::irq_disable();
+    }
+}
+
+void restart_aborted_cycle_locked(Tcb* cur) {
+    // Restart the entry from the top, on this same stack: we are deep
+    // below the frames context_init rewrites, and never return to them.
+    cur->abort_cycle = false;
+    port::context_init(&cur->ctx, cur->stack_lo, cur->stack_size, task_start, cur);
+    void* discard;
+    chm_port_switch(&discard, cur->ctx.sp);
+    __builtin_unreachable();
+}
+
+}  // namespace chm::kernel
