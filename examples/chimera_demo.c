@@ -37,7 +37,7 @@ static void supervisor(void *arg) {
     for (int i = 0;; ++i) {
         if (i % 100 == 99) {
             g_command = -g_command;
-            chm_sem_v(&g_new_setpoint);
+            (void)!chm_sem_v(&g_new_setpoint);
         }
         chm_task_wait_period();
     }
@@ -93,7 +93,7 @@ int main(void) {
         fprintf(stderr, "chimera-demo: kernel init failed\n");
         return 1;
     }
-    chm_sem_init(&g_new_setpoint, CHM_SEM_COUNTING, 0, 0);
+    if (chm_sem_init(&g_new_setpoint, CHM_SEM_COUNTING, 0, 0) != 0) return 1;
     static chm_tid_t ids[3];
     chm_tid_t mon;
     printf("Chimera single-RTPU demo: 1 kHz servo, 100 Hz supervisor, background logger (MUF)\n");

@@ -30,7 +30,7 @@ struct Backplane {
     Backplane() {
         if (chm_bp_join(file.path.c_str(), kSelf, "bench") != 0) fail(std::string("chm_bp_join: ") + chm_bp_last_error());
     }
-    ~Backplane() { chm_bp_leave(); }
+    ~Backplane() { (void)chm_bp_leave(); }
     chm_msgq_t* queue(const char* name, int where, std::uint32_t count) {
         chm_msgq_attr_t a;
         chm_msgq_attr_init(&a);

@@ -25,7 +25,7 @@ struct Backplane {
         if (chm_bp_attach_host(file.path.c_str(), "bench", nullptr) != 0)
             fail(std::string("chm_bp_attach_host: ") + chm_bp_last_error());
     }
-    ~Backplane() { chm_bp_leave(); }
+    ~Backplane() { (void)chm_bp_leave(); }
     chm_rsem_t* sem(const char* name, uint32_t initial) {
         chm_rsem_t* s = nullptr;
         if (chm_rsem_create(name, CHM_SEM_COUNTING, initial, CHM_SHM_COMMON, &s) != 0)
@@ -44,10 +44,10 @@ void rsem_noblock(Session& s) {
     chm_rsem_t* sem = bp.sem("noblock", 0x7fffffff);
     const std::string cfg = "pinned " + s.cpu_name(0) + ", host process, counting semaphore in common memory";
     s.time_ops("remote_semp_noblock", cfg + "; P on a positive count", [&](std::uint64_t n) {
-        for (std::uint64_t i = 0; i < n; ++i) chm_rsem_p(sem);
+        for (std::uint64_t i = 0; i < n; ++i) (void)chm_rsem_p(sem);
     });
     s.time_ops("remote_semv_nowake", cfg + "; V with nobody waiting", [&](std::uint64_t n) {
-        for (std::uint64_t i = 0; i < n; ++i) chm_rsem_v(sem);
+        for (std::uint64_t i = 0; i < n; ++i) (void)chm_rsem_v(sem);
     });
 }
 CHM_BENCH_MEASUREMENT(rsem_noblock, "remote_semp_noblock", "remote_semv_nowake");
@@ -66,7 +66,7 @@ void rsem_handoff(Session& s) {
         if (chm_rsem_open("ping", &pi) != 0 || chm_rsem_open("pong", &po) != 0) return 3;
         for (;;) {
             if (chm_rsem_p(pi) != 0) return 4;
-            chm_rsem_v(po);
+            (void)chm_rsem_v(po);
         }
     });
     s.time_ops("rsem_handoff_sleeping_host_processes",
@@ -74,8 +74,8 @@ void rsem_handoff(Session& s) {
                    "), two host processes, each sleeping on its waiter record's futex; RT/2",
                [&](std::uint64_t n) {
                    for (std::uint64_t i = 0; i < n; ++i) {
-                       chm_rsem_v(ping);
-                       chm_rsem_p(pong);
+                       (void)chm_rsem_v(ping);
+                       (void)chm_rsem_p(pong);
                    }
                },
                2);

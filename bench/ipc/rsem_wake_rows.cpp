@@ -128,7 +128,7 @@ void rsem_wake_local_row(Session& s) {
     ipcb::Joined me(f.path, 1);
     chm_rsem_t* sem = make_sem("wake");
     chm_sem_t b;
-    chm_sem_init(&b, CHM_SEM_BINARY, 0, 0);
+    (void)chm_sem_init(&b, CHM_SEM_BINARY, 0, 0);
     volatile bool stop = false;
     {
         ipcb::Kernel k(1, 0);
@@ -142,7 +142,7 @@ void rsem_wake_local_row(Session& s) {
                                   const std::uint64_t t0 = ticks();
                                   check_rsem(chm_rsem_v(sem), "chm_rsem_v");
                                   sum += ticks() - t0;
-                                  chm_sem_p(&b);  // L blocks again, Z gives b back
+                                  (void)chm_sem_p(&b);  // L blocks again, Z gives b back
                               }
                               return clk.ns(sum) - double(n) * clk.pair_ns;
                           }, &how);
@@ -162,14 +162,14 @@ void rsem_wake_local_row(Session& s) {
             }
         };
         std::function<void()> lowest = [&] {
-            while (!stop) chm_sem_v(&b);
+            while (!stop) (void)chm_sem_v(&b);
         };
         k.spawn(&high, 10, "high");
         k.spawn(&low, 5, "low");
         k.spawn(&lowest, 1, "lowest");
         k.run();
     }
-    chm_sem_destroy(&b);
+    (void)chm_sem_destroy(&b);
 }
 CHM_BENCH_MEASUREMENT(rsem_wake_local_row, "remote_semv_wake_local");
 

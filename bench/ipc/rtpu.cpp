@@ -87,7 +87,7 @@ Joined::Joined(const std::string& path, int slot) {
     if (const int r = chm_bp_join(path.c_str(), slot, "bench")) fail_bp("chm_bp_join", r);
 }
 
-Joined::~Joined() { chm_bp_leave(); }
+Joined::~Joined() { (void)chm_bp_leave(); }
 
 Kernel::Kernel(int slot, std::uint64_t idle_poll_ns, std::uint64_t deadline_ns, int parent) {
     chm_kernel_config_t cfg;
@@ -151,7 +151,7 @@ std::unique_ptr<Child> rtpu_child(int cpu, const std::string& path, int slot,
             std::fprintf(stderr, "chimera-bench RTPU %d: %s\n", slot, e.what());
             rc = 3;
         }
-        chm_bp_leave();
+        (void)chm_bp_leave();
         return rc;
     });
 }

@@ -70,8 +70,8 @@ void msg_size_scaling(Session& s) {
             }
             return double(mono_ns() - t0);
         });
-        chm_msgq_close(q);
-        chm_msgq_destroy(qname.c_str());
+        (void)chm_msgq_close(q);
+        (void)chm_msgq_destroy(qname.c_str());
         chm.add(c);
         // Boost.Interprocess message_queue, its name removed once mapped.
         {

@@ -95,7 +95,7 @@ void servo_rows(Session& s) {
     Rtpus rtpus(f.path);
     if (const int r = chm_bp_attach_host(f.path.c_str(), "bench", nullptr)) ipcb::fail_bp("chm_bp_attach_host", r);
     struct Leave {
-        ~Leave() { chm_bp_leave(); }
+        ~Leave() { (void)chm_bp_leave(); }
     } leave;
     for (int n : {1, 2}) {  // until each answers
         chm_rtpu_info_t info;
@@ -125,7 +125,7 @@ void servo_rows(Session& s) {
         if (!cpu_per_cycle(1, "empty", &mod, &mc) || !cpu_per_cycle(1, "bare", &peer, &pc))
             throw std::runtime_error("the module or the bare task ran no cycle");
         check(chm_servo_kill(m), "chm_servo_kill");
-        chm_rtpu_destroy(1, bare);
+        (void)chm_rtpu_destroy(1, bare);
         char cfg[300];
         std::snprintf(cfg, sizeof cfg,
                       "chimera-rtpu defaults (MUF), RTPU 1, 1 kHz, one input and one output double; kernel CPU "
@@ -149,7 +149,7 @@ void servo_rows(Session& s) {
         std::uint64_t misses0 = 0;
         for (auto m : {a1, b1, a2, b2}) {
             chm_servo_status_t st;
-            chm_servo_status(m, &st);
+            (void)chm_servo_status(m, &st);
             misses0 += st.misses;
         }
         int late = 0;
@@ -172,10 +172,10 @@ void servo_rows(Session& s) {
         std::uint64_t misses = 0;
         for (auto m : {a1, b1, a2, b2}) {
             chm_servo_status_t st;
-            chm_servo_status(m, &st);
+            (void)chm_servo_status(m, &st);
             misses += st.misses;
         }
-        for (auto m : {a1, b1, a2, b2}) chm_servo_kill(m);
+        for (auto m : {a1, b1, a2, b2}) (void)chm_servo_kill(m);
         std::sort(periods.begin(), periods.end());
         char cfg[300];
         std::snprintf(cfg, sizeof cfg,
@@ -193,7 +193,7 @@ void servo_rows(Session& s) {
             const std::uint64_t t0 = mono_ns();
             chm_servo_module_t m = spawn(2, MODULE1_SO, "spawned", kMs);
             ns.push_back(double(mono_ns() - t0));
-            chm_servo_kill(m);
+            (void)chm_servo_kill(m);
         }
         std::sort(ns.begin(), ns.end());
         s.emit("module_spawn",

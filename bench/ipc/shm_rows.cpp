@@ -28,7 +28,7 @@ struct Host {
     explicit Host(const std::string& path) {
         if (const int r = chm_bp_attach_host(path.c_str(), "bench", nullptr)) ipcb::fail_bp("chm_bp_attach_host", r);
     }
-    ~Host() { chm_bp_leave(); }
+    ~Host() { (void)chm_bp_leave(); }
 };
 
 struct Segment {
@@ -36,14 +36,14 @@ struct Segment {
     Segment() {
         void* q = nullptr;
         if (const int r = chm_shm_create("bench.shm", kBytes, CHM_SHM_COMMON, &q)) ipcb::fail_bp("chm_shm_create", r);
-        chm_shm_detach(q);  // use it the way another process would: attach by name
+        (void)chm_shm_detach(q);  // use it the way another process would: attach by name
         std::size_t size = 0;
         if (const int r = chm_shm_attach("bench.shm", &q, &size)) ipcb::fail_bp("chm_shm_attach", r);
         p = static_cast<std::uint64_t*>(q);
     }
     ~Segment() {
-        chm_shm_detach(p);
-        chm_shm_destroy("bench.shm");
+        (void)chm_shm_detach(p);
+        (void)chm_shm_destroy("bench.shm");
     }
 };
 

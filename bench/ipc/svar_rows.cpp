@@ -24,7 +24,7 @@ void copy_rows(Session& s, std::uint32_t n, const char* row, const char* peer) {
     ipcb::BackplaneFile f("svar");
     if (const int r = chm_bp_attach_host(f.path.c_str(), "bench", nullptr)) ipcb::fail_bp("chm_bp_attach_host", r);
     struct Leave {
-        ~Leave() { chm_bp_leave(); }
+        ~Leave() { (void)chm_bp_leave(); }
     } leave;
     chm_svar_decl_t in{"in", CHM_SVAR_DOUBLE, n, 1, ""}, out{"out", CHM_SVAR_DOUBLE, n, 1, ""};
     if (const int r = chm_svar_declare(&in)) ipcb::fail_bp("chm_svar_declare", r);
@@ -38,8 +38,8 @@ void copy_rows(Session& s, std::uint32_t n, const char* row, const char* peer) {
     auto svar = [&](std::uint64_t iters) {
         const std::uint64_t t0 = mono_ns();
         for (std::uint64_t i = 0; i < iters; ++i) {
-            chm_svar_set_read(set);
-            chm_svar_set_write(set);
+            (void)chm_svar_set_read(set);
+            (void)chm_svar_set_write(set);
         }
         return double(mono_ns() - t0);
     };
@@ -54,7 +54,7 @@ void copy_rows(Session& s, std::uint32_t n, const char* row, const char* peer) {
         return double(mono_ns() - t0);
     };
     const auto [sv, mc] = s.measure_interleaved(svar, copy);
-    chm_svar_set_destroy(set);
+    (void)chm_svar_set_destroy(set);
     char cfg[300];
     std::snprintf(cfg, sizeof cfg,
                   "pinned %s, host process, default table; one set: input and output of %u doubles; "

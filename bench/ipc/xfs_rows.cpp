@@ -115,7 +115,7 @@ void xfs_rows(Session& s) {
             const std::uint64_t t0 = mono_ns();
             for (std::uint64_t i = 0; i < n; ++i) {
                 if (xfs_off == kFile) {
-                    chm_xfs_lseek(h, 0, SEEK_SET);
+                    (void)chm_xfs_lseek(h, 0, SEEK_SET);
                     xfs_off = 0;
                 }
                 const std::int64_t r = chm_xfs_read(h, buf.data(), kBlock);
@@ -135,7 +135,7 @@ void xfs_rows(Session& s) {
             return double(mono_ns() - t0);
         };
         std::tie(xfs, peer) = s.measure_interleaved(by_xfs, by_pread);
-        chm_xfs_close(h);
+        (void)chm_xfs_close(h);
         close(fd);
         char cwd[64];
         call = s.measure([&](std::uint64_t n) {

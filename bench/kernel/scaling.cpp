@@ -47,7 +47,7 @@ void yield_partner(void* p) {
 }
 void sem_partner(void* p) {
     auto* a = static_cast<Partner*>(p);
-    while (!a->stop) chm_sem_p(&a->sem);
+    while (!a->stop) (void)chm_sem_p(&a->sem);
 }
 
 using Costs = std::map<std::string, Stats>;
@@ -55,7 +55,7 @@ using Costs = std::map<std::string, Stats>;
 void fixed_ops(Session& s, int tasks, Costs& out) {
     kb::Kernel k;
     Partner a;
-    chm_sem_init(&a.sem, CHM_SEM_BINARY, 0, 0);
+    (void)chm_sem_init(&a.sem, CHM_SEM_BINARY, 0, 0);
     std::vector<chm_tid_t> ids;
     std::function<void()> driver = [&] {
         kb::TaskSpec bg;
@@ -68,7 +68,7 @@ void fixed_ops(Session& s, int tasks, Costs& out) {
         out["set_priority"] = s.measure([&](std::uint64_t n) {
             const std::uint64_t t0 = mono_ns();
             for (std::uint64_t i = 0; i < n; ++i, ++r)
-                chm_task_set_priority(ids[std::size_t(r % std::uint64_t(tasks))], 1 + int((r / 3) % 7));
+                (void)chm_task_set_priority(ids[std::size_t(r % std::uint64_t(tasks))], 1 + int((r / 3) % 7));
             return double(mono_ns() - t0);
         });
         out["spawn_destroy"] = s.measure([&](std::uint64_t n) {
@@ -76,7 +76,7 @@ void fixed_ops(Session& s, int tasks, Costs& out) {
             t.priority = 1;
             t.stack = 16 * 1024;
             const std::uint64_t t0 = mono_ns();
-            for (std::uint64_t i = 0; i < n; ++i) chm_task_destroy(kb::spawn(nop, nullptr, t));
+            for (std::uint64_t i = 0; i < n; ++i) (void)chm_task_destroy(kb::spawn(nop, nullptr, t));
             return double(mono_ns() - t0);
         });
         kb::TaskSpec hi;
@@ -85,10 +85,10 @@ void fixed_ops(Session& s, int tasks, Costs& out) {
         const chm_tid_t waker = kb::spawn(sem_partner, &a, hi);  // runs, blocks in P
         out["v_wake_round"] = s.measure([&](std::uint64_t n) {
             const std::uint64_t t0 = mono_ns();
-            for (std::uint64_t i = 0; i < n; ++i) chm_sem_v(&a.sem);
+            for (std::uint64_t i = 0; i < n; ++i) (void)chm_sem_v(&a.sem);
             return double(mono_ns() - t0);
         });
-        chm_task_destroy(waker);
+        (void)chm_task_destroy(waker);
         kb::TaskSpec eq;
         eq.priority = 50;
         eq.stack = 16 * 1024;
@@ -99,13 +99,13 @@ void fixed_ops(Session& s, int tasks, Costs& out) {
             return double(mono_ns() - t0);
         }, 2);
         a.stop = true;
-        for (auto id : ids) chm_task_destroy(id);
+        for (auto id : ids) (void)chm_task_destroy(id);
     };
     kb::TaskSpec d;
     d.priority = 50;
     kb::spawn_fn(&driver, d);
     k.run();
-    chm_sem_destroy(&a.sem);
+    (void)chm_sem_destroy(&a.sem);
 }
 
 void muf_spawn(Session& s, int tasks, Costs& out) {
@@ -121,10 +121,10 @@ void muf_spawn(Session& s, int tasks, Costs& out) {
         for (int i = 0; i < tasks; ++i) ids.push_back(kb::spawn(nop, nullptr, bg));
         out["muf_periodic_spawn_destroy"] = s.measure([&](std::uint64_t n) {
             const std::uint64_t t0 = mono_ns();
-            for (std::uint64_t i = 0; i < n; ++i) chm_task_destroy(kb::spawn(nop, nullptr, bg));
+            for (std::uint64_t i = 0; i < n; ++i) (void)chm_task_destroy(kb::spawn(nop, nullptr, bg));
             return double(mono_ns() - t0);
         });
-        for (auto id : ids) chm_task_destroy(id);
+        for (auto id : ids) (void)chm_task_destroy(id);
     };
     kb::TaskSpec d;
     d.critical = 1;  // aperiodic driver: critical, so it outranks the periodic set

@@ -25,34 +25,34 @@ void pv_rows(Session& s) {
     Session::pin(s.cpu(0));
     kb::Kernel k;
     chm_sem_t sem;
-    chm_sem_init(&sem, CHM_SEM_COUNTING, 1, 0);
+    (void)chm_sem_init(&sem, CHM_SEM_COUNTING, 1, 0);
     std::function<void()> body = [&] {
         const std::string w = where(s, 1) + ", counting semaphore";
         s.time_ops("local_pv_noblock", w + "; chm_sem_p + chm_sem_v, count 1", [&](std::uint64_t n) {
             for (std::uint64_t i = 0; i < n; ++i) {
-                chm_sem_p(&sem);
-                chm_sem_v(&sem);
+                (void)chm_sem_p(&sem);
+                (void)chm_sem_v(&sem);
             }
         });
         s.time_custom("local_p_noblock", w + "; chm_sem_p with units available (given back untimed)",
                       [&](std::uint64_t n) {
-                          for (std::uint64_t i = 0; i < n; ++i) chm_sem_v(&sem);
+                          for (std::uint64_t i = 0; i < n; ++i) (void)chm_sem_v(&sem);
                           const std::uint64_t t0 = mono_ns();
-                          for (std::uint64_t i = 0; i < n; ++i) chm_sem_p(&sem);
+                          for (std::uint64_t i = 0; i < n; ++i) (void)chm_sem_p(&sem);
                           return double(mono_ns() - t0);
                       });
         s.time_custom("local_v_nowake", w + "; chm_sem_v with nobody waiting (taken back untimed)",
                       [&](std::uint64_t n) {
                           const std::uint64_t t0 = mono_ns();
-                          for (std::uint64_t i = 0; i < n; ++i) chm_sem_v(&sem);
+                          for (std::uint64_t i = 0; i < n; ++i) (void)chm_sem_v(&sem);
                           const double t = double(mono_ns() - t0);
-                          for (std::uint64_t i = 0; i < n; ++i) chm_sem_p(&sem);
+                          for (std::uint64_t i = 0; i < n; ++i) (void)chm_sem_p(&sem);
                           return t;
                       });
     };
     kb::spawn_fn(&body, {});
     k.run();
-    chm_sem_destroy(&sem);
+    (void)chm_sem_destroy(&sem);
 }
 CHM_BENCH_MEASUREMENT(pv_rows, "local_pv_noblock", "local_p_noblock", "local_v_nowake");
 
@@ -72,7 +72,7 @@ void pp_low(void* p) {
         const std::uint64_t t = ticks();  // first instruction after H blocked
         a->l_sum += t - a->stamp_h;
         a->stamp_l = ticks();
-        chm_sem_v(&a->sem);
+        (void)chm_sem_v(&a->sem);
     }
 }
 
@@ -84,12 +84,12 @@ PingPongFigures pingpong(Session& s, int accounting) {
     kb::Kernel k({CHM_SCHED_FIXED, accounting});
     const kb::TickClock& clk = kb::tick_clock();
     PingPong a;
-    chm_sem_init(&a.sem, CHM_SEM_BINARY, 0, 0);
+    (void)chm_sem_init(&a.sem, CHM_SEM_BINARY, 0, 0);
     PingPongFigures f;
     std::function<void()> high = [&] {
         auto round = [&] {
             a.stamp_h = ticks();
-            chm_sem_p(&a.sem);
+            (void)chm_sem_p(&a.sem);
             return ticks() - a.stamp_l;  // first instruction after L's V
         };
         f.v_wake_switch = s.measure([&](std::uint64_t n) {
@@ -109,7 +109,7 @@ PingPongFigures pingpong(Session& s, int accounting) {
     kb::spawn_fn(&high, hi);
     kb::spawn(pp_low, &a, 1);
     k.run();
-    chm_sem_destroy(&a.sem);
+    (void)chm_sem_destroy(&a.sem);
     return f;
 }
 
@@ -142,13 +142,13 @@ struct Wake3 {
 void w3_low(void* p) {
     auto* a = static_cast<Wake3*>(p);
     for (;;) {
-        chm_sem_p(&a->s);
+        (void)chm_sem_p(&a->s);
         if (a->stop) return;
     }
 }
 void w3_lowest(void* p) {
     auto* a = static_cast<Wake3*>(p);
-    while (!a->stop) chm_sem_v(&a->b);
+    while (!a->stop) (void)chm_sem_v(&a->b);
 }
 
 void v_wake_row(Session& s) {
@@ -156,8 +156,8 @@ void v_wake_row(Session& s) {
     kb::Kernel k;
     const kb::TickClock& clk = kb::tick_clock();
     Wake3 a;
-    chm_sem_init(&a.s, CHM_SEM_BINARY, 0, 0);
-    chm_sem_init(&a.b, CHM_SEM_BINARY, 0, 0);
+    (void)chm_sem_init(&a.s, CHM_SEM_BINARY, 0, 0);
+    (void)chm_sem_init(&a.b, CHM_SEM_BINARY, 0, 0);
     std::function<void()> high = [&] {
         s.time_custom("local_v_wake",
                       where(s, 1) + "; binary semaphore: chm_sem_v by a priority-10 task waking a "
@@ -167,14 +167,14 @@ void v_wake_row(Session& s) {
                           std::uint64_t sum = 0;
                           for (std::uint64_t i = 0; i < n; ++i) {
                               const std::uint64_t t0 = ticks();
-                              chm_sem_v(&a.s);
+                              (void)chm_sem_v(&a.s);
                               sum += ticks() - t0;
-                              chm_sem_p(&a.b);  // L blocks again, Z gives b back
+                              (void)chm_sem_p(&a.b);  // L blocks again, Z gives b back
                           }
                           return clk.ns(sum) - double(n) * clk.pair_ns;
                       });
         a.stop = true;
-        chm_sem_v(&a.s);
+        (void)chm_sem_v(&a.s);
     };
     kb::TaskSpec hi;
     hi.priority = 10;
@@ -182,8 +182,8 @@ void v_wake_row(Session& s) {
     kb::spawn(w3_low, &a, 5);
     kb::spawn(w3_lowest, &a, 1);
     k.run();
-    chm_sem_destroy(&a.s);
-    chm_sem_destroy(&a.b);
+    (void)chm_sem_destroy(&a.s);
+    (void)chm_sem_destroy(&a.b);
 }
 CHM_BENCH_MEASUREMENT(v_wake_row, "local_v_wake");
 
@@ -197,9 +197,9 @@ struct Contention {
 void ct_low(void* p) {
     auto* a = static_cast<Contention*>(p);
     while (!a->stop) {
-        chm_sem_p(&a->m);
-        chm_sem_v(&a->g);  // H runs, blocks on m; we come back here boosted
-        chm_sem_v(&a->m);
+        (void)chm_sem_p(&a->m);
+        (void)chm_sem_v(&a->g);  // H runs, blocks on m; we come back here boosted
+        (void)chm_sem_v(&a->m);
     }
 }
 
@@ -208,8 +208,8 @@ void contention_row(Session& s) {
     kb::Kernel k;
     const kb::TickClock& clk = kb::tick_clock();
     Contention a;
-    chm_sem_init(&a.m, CHM_SEM_BINARY, 1, CHM_SEM_INHERIT);
-    chm_sem_init(&a.g, CHM_SEM_BINARY, 0, 0);
+    (void)chm_sem_init(&a.m, CHM_SEM_BINARY, 1, CHM_SEM_INHERIT);
+    (void)chm_sem_init(&a.g, CHM_SEM_BINARY, 0, 0);
     std::function<void()> high = [&] {
         s.time_custom("resource_contention_resched",
                       where(s, 1) + "; chm_sem_p by a priority-10 task on a binary semaphore "
@@ -221,11 +221,11 @@ void contention_row(Session& s) {
                       [&](std::uint64_t n) {
                           std::uint64_t sum = 0;
                           for (std::uint64_t i = 0; i < n; ++i) {
-                              chm_sem_p(&a.g);  // L now holds m
+                              (void)chm_sem_p(&a.g);  // L now holds m
                               const std::uint64_t t0 = ticks();
-                              chm_sem_p(&a.m);
+                              (void)chm_sem_p(&a.m);
                               sum += ticks() - t0;
-                              chm_sem_v(&a.m);
+                              (void)chm_sem_v(&a.m);
                           }
                           return clk.ns(sum) - double(n) * clk.pair_ns;
                       });
@@ -236,8 +236,8 @@ void contention_row(Session& s) {
     kb::spawn_fn(&high, hi);
     kb::spawn(ct_low, &a, 1);
     k.run();
-    chm_sem_destroy(&a.m);
-    chm_sem_destroy(&a.g);
+    (void)chm_sem_destroy(&a.m);
+    (void)chm_sem_destroy(&a.g);
 }
 CHM_BENCH_MEASUREMENT(contention_row, "resource_contention_resched");
 

@@ -69,7 +69,7 @@ void task_rows(Session& s) {
                        for (std::uint64_t i = 0; i < n; ++i) {
                            const std::size_t j = std::size_t(i % kBatch);
                            if (j == 0) prio = prio == 2 ? 3 : 2;
-                           chm_task_set_priority(ids[j], prio);
+                           (void)chm_task_set_priority(ids[j], prio);
                        }
                    });
         destroy_batch();
@@ -77,7 +77,7 @@ void task_rows(Session& s) {
                    where + "; chm_task_spawn then chm_task_destroy of the same task",
                    [&](std::uint64_t n) {
                        for (std::uint64_t i = 0; i < n; ++i)
-                           chm_task_destroy(kb::spawn(nop, nullptr, 1));
+                           (void)chm_task_destroy(kb::spawn(nop, nullptr, 1));
                    });
         // Like for like with a thread or fiber created, run and ended: the
         // new task (priority 10) preempts the driver at once, runs its empty

@@ -90,7 +90,7 @@ int main(int argc, char** argv) {
         fprintf(stderr, "chimera-msgq-pingpong: the partner failed (status %d)\n", st);
     }
 out:
-    chm_bp_leave();
+    (void)!chm_bp_leave();
     unlink(path);
     return rc;
 }

@@ -205,10 +205,10 @@ static int spawn_all(const char* dir) {
 static void teardown(void) {
     for (int i = 0; i < M_COUNT; ++i)
         if (g_spawned[i]) {
-            chm_servo_kill(g_mod[i]);
+            (void)!chm_servo_kill(g_mod[i]);
             g_spawned[i] = 0;
         }
-    chm_servo_release(1u << 1 | 1u << 2);
+    (void)!chm_servo_release(1u << 1 | 1u << 2);
 }
 
 static int run(double tol) {
@@ -343,7 +343,7 @@ int main(int argc, char** argv) {
     teardown();
     *g_phase = DEMO_DONE;
     publish();
-    chm_svar_set_destroy(g_set);
-    chm_bp_leave();
+    (void)!chm_svar_set_destroy(g_set);
+    (void)!chm_bp_leave();
     return rc;
 }

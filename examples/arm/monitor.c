@@ -136,7 +136,7 @@ int main(int argc, char** argv) {
         nap_ms(10);
     }
     if (csv) fclose(csv);
-    chm_bp_leave();
+    (void)!chm_bp_leave();
     if (!done) {
         fprintf(stderr, "chimera-arm-monitor: the job did not finish within %d s\n", seconds);
         return 1;

@@ -41,7 +41,7 @@ static void on_shutdown(void *arg) {
     (void)arg;
     /* First the queue goes, then the task ends (a sample it holds is
      * answered first), then the counts are final (bounded wait). */
-    chm_msgq_destroy(LOOP_SENSE);
+    (void)!chm_msgq_destroy(LOOP_SENSE);
     for (int i = 0; i < 20 && !g_done; ++i) chm_task_pause_until(chm_time_now() + 1000000);
     printf("controller: shutdown hook: %llu samples received, %llu answered, %llu could not be answered\n",
            (unsigned long long)g_samples, (unsigned long long)g_answers, (unsigned long long)g_unanswered);
@@ -62,7 +62,10 @@ int main(int argc, char **argv) {
         printf("controller: cannot spawn: %s\n", strerror(-r));
         return 1;
     }
-    chm_kernel_on_shutdown(on_shutdown, NULL);
+    if (chm_kernel_on_shutdown(on_shutdown, NULL) != 0) {
+        printf("controller: %s\n", chm_err_last());
+        return 1;
+    }
     printf("controller: answering %s on RTPU %d (task %d)\n", LOOP_SENSE, chm_bp_self(), (int)tid);
     return 0;
 }

@@ -130,7 +130,7 @@ int main(int argc, char **argv) {
                 r == -ENOENT ? "not created within 10 s" : chm_bp_last_error());
         return 2;
     }
-    chm_bp_status(&g_start);
+    (void)!chm_bp_status(&g_start);
     /* Records queued before we came are history: start from the newest. */
     loop_stat_t st, prev = {0};
     while (chm_msgq_try_receive(q, &st, sizeof st, NULL) == (int)sizeof st) prev = st;
@@ -204,7 +204,7 @@ int main(int argc, char **argv) {
         printf("records: cycles %llu..%llu, each received once and in order\n", (unsigned long long)first,
                (unsigned long long)prev.seq);
     }
-    chm_msgq_close(q);
-    chm_bp_leave();
+    (void)!chm_msgq_close(q);
+    (void)!chm_bp_leave();
     return status;
 }

@@ -137,8 +137,8 @@ static void on_shutdown(void *arg) {
                (unsigned long long)ts.cycles, (unsigned long long)g_sent, (unsigned long long)g_answered,
                (unsigned long long)g_lost, (unsigned long long)g_unsent, (unsigned long long)ts.misses,
                (unsigned long long)g_stats_dropped, (unsigned long long)g_safe_cycles);
-    chm_msgq_destroy(LOOP_REPLY);
-    chm_msgq_destroy(LOOP_STATS);
+    (void)!chm_msgq_destroy(LOOP_REPLY);
+    (void)!chm_msgq_destroy(LOOP_STATS);
 }
 
 int main(int argc, char **argv) {
@@ -160,7 +160,10 @@ int main(int argc, char **argv) {
         printf("sensor: cannot spawn the loop: %s\n", strerror(-r));
         return 1;
     }
-    chm_kernel_on_shutdown(on_shutdown, NULL);
+    if (chm_kernel_on_shutdown(on_shutdown, NULL) != 0) {
+        printf("sensor: %s\n", chm_err_last());
+        return 1;
+    }
     printf("sensor: 1 kHz loop on RTPU %d (task %d): samples to %s, answers on %s, figures on %s\n",
            chm_bp_self(), (int)g_loop, LOOP_SENSE, LOOP_REPLY, LOOP_STATS);
     return 0;

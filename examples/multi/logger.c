@@ -87,7 +87,10 @@ int main(int argc, char **argv) {
     a.priority = 10;
     chm_tid_t tid;
     if ((r = chm_task_spawn(&tid, log_task, NULL, &a)) != 0) return 1;
-    chm_kernel_on_shutdown(on_shutdown, NULL);
+    if (chm_kernel_on_shutdown(on_shutdown, NULL) != 0) {
+        printf("logger: %s\n", chm_err_last());
+        return 1;
+    }
     printf("logger: running on RTPU %d, waiting on %s\n", chm_bp_self(), SERVO_TICK);
     return 0;
 }

@@ -27,7 +27,10 @@ static void on_signal(int signo, void *arg) {
 
 static void servo(void *arg) {
     (void)arg;
-    chm_usig_handle(SERVO_SIG_SOFT, on_signal, NULL);
+    if (chm_usig_handle(SERVO_SIG_SOFT, on_signal, NULL) != 0) {
+        printf("servo: %s\n", chm_err_last());
+        return;
+    }
     double pos = 0, vel = 0;
     uint64_t cycles = 0, worst = 0;
     for (;;) {
@@ -48,11 +51,11 @@ static void servo(void *arg) {
             g_s->cycles = cycles;
             g_s->worst_late_ns = worst;
             g_s->soft = g_soft;
-            chm_spin_unlock(&g_s->lock);
+            (void)!chm_spin_unlock(&g_s->lock);
         }
         if (cycles % 100 == 0) {
             g_s->tick_ns = chm_time_now(); /* ordered before the V by the semaphore's lock */
-            chm_rsem_v(g_tick);
+            (void)!chm_rsem_v(g_tick);
         }
         chm_task_wait_period();
     }
@@ -65,8 +68,8 @@ static void on_shutdown(void *arg) {
     if (chm_task_find("servo", &me) == 0 && chm_task_status(me, &st) == 0)
         printf("servo: shutdown hook: %llu cycles, %llu deadline misses, worst release lateness %.0f us\n",
                (unsigned long long)st.cycles, (unsigned long long)st.misses, (double)g_s->worst_late_ns / 1e3);
-    chm_shm_destroy(SERVO_STATE); /* the names go; attached peers keep the memory */
-    chm_rsem_destroy(SERVO_TICK);
+    (void)!chm_shm_destroy(SERVO_STATE); /* the names go; attached peers keep the memory */
+    (void)!chm_rsem_destroy(SERVO_TICK);
 }
 
 int main(int argc, char **argv) {
@@ -80,7 +83,10 @@ int main(int argc, char **argv) {
         return 1;
     }
     g_s = mem;
-    chm_spin_init(&g_s->lock);
+    if (chm_spin_init(&g_s->lock) != 0) {
+        printf("servo: %s\n", chm_err_last());
+        return 1;
+    }
     g_s->setpoint = 1.0;
     r = chm_rsem_create(SERVO_TICK, CHM_SEM_COUNTING, 0, -1, &g_tick);
     if (r == -EEXIST) r = chm_rsem_open(SERVO_TICK, &g_tick);
@@ -99,7 +105,10 @@ int main(int argc, char **argv) {
         printf("servo: cannot spawn the loop: %s\n", strerror(-r));
         return 1;
     }
-    chm_kernel_on_shutdown(on_shutdown, NULL);
+    if (chm_kernel_on_shutdown(on_shutdown, NULL) != 0) {
+        printf("servo: %s\n", chm_err_last());
+        return 1;
+    }
     printf("servo: 1 kHz loop running on RTPU %d (task %d); state in %s, tick on %s\n", chm_bp_self(), (int)tid,
            SERVO_STATE, SERVO_TICK);
     return 0;

@@ -28,7 +28,7 @@ static void supervise(void *arg) {
         }
         seen = *g_s;
         if (k % 20 == 0) g_s->setpoint = -g_s->setpoint;
-        chm_spin_unlock(&g_s->lock);
+        (void)!chm_spin_unlock(&g_s->lock);
         if (k % 20 == 0) printf("supervisor: set point -> %+.1f\n", -seen.setpoint);
         if (k % 10 == 0) {
             printf("supervisor: t=%2us  servo position %+.3f (set point %+.1f, %s gains), %llu cycles/s, "

@@ -15,6 +15,8 @@
 #ifndef CHIMERA_BP_H
 #define CHIMERA_BP_H
 
+#include "chimera/status.h"
+
 #include <stddef.h>
 #include <stdint.h>
 
@@ -48,13 +50,13 @@ void chm_bp_config_init(chm_bp_config_t* cfg);
  * else <default directory>/backplane.bp (chm_bp_default_dir). Nothing is
  * created. Errors: -EINVAL NULL buf; -ENAMETOOLONG it does not fit in len
  * bytes. */
-int chm_bp_default_path(char* buf, size_t len);
+CHM_CHECK int chm_bp_default_path(char* buf, size_t len);
 
 /* Write this user's directory for the default backplane and its logs into
  * buf: $XDG_RUNTIME_DIR/chimera when XDG_RUNTIME_DIR names a directory
  * owned by the caller, else /dev/shm/chimera-<uid>. Nothing is created.
  * Errors: -EINVAL NULL buf; -ENAMETOOLONG. */
-int chm_bp_default_dir(char* buf, size_t len);
+CHM_CHECK int chm_bp_default_dir(char* buf, size_t len);
 
 /* Check that `dir` is a directory only the caller can use: not a symbolic
  * link (lstat), owned by the caller's effective uid, no permission for the
@@ -65,7 +67,7 @@ int chm_bp_default_dir(char* buf, size_t len);
  * directory, its owner and mode, and the fix): -ELOOP a symbolic link;
  * -ENOTDIR not a directory; -EPERM another owner or group/other access;
  * -ENOENT missing (create == 0); other -errno from mkdir/lstat. */
-int chm_bp_check_dir(const char* dir, int create);
+CHM_CHECK int chm_bp_check_dir(const char* dir, int create);
 
 /* Check, without attaching, that this process may attach the backplane at
  * `path` (NULL: default), the check every attach makes: the file is opened
@@ -80,7 +82,7 @@ int chm_bp_check_dir(const char* dir, int create);
  * a mode that lets others (or, not made for it, the group) write;
  * -EBADMSG not a regular file, or not a valid backplane; -ENOENT; other
  * -errno from open. */
-int chm_bp_check_file(const char* path);
+CHM_CHECK int chm_bp_check_file(const char* path);
 
 /* Create a backplane file at `path` (NULL: the default path). The whole
  * file is built and its space reserved (posix_fallocate) under a temporary
@@ -94,7 +96,7 @@ int chm_bp_check_file(const char* path);
  * -EFBIG the layout reaches 4 GiB, or the file size limit; -ENOSPC no room
  * (a full disk fails here, never later with SIGBUS); other -errno from
  * open/fallocate/mmap/link. Nothing is left behind on error. */
-int chm_bp_create(const char* path, const chm_bp_config_t* cfg);
+CHM_CHECK int chm_bp_create(const char* path, const chm_bp_config_t* cfg);
 
 /* Validate the backplane file at `path` (NULL: default) without attaching:
  * the header, the RTPU table, the express-mail rings, every arena's header
@@ -105,7 +107,7 @@ int chm_bp_create(const char* path, const chm_bp_config_t* cfg);
  * Errors: -EBADMSG the file or an object in it is corrupt, and
  * chm_err_last() names the file, the structure and the field;
  * -ENOENT no file; other -errno from open/mmap. */
-int chm_bp_validate(const char* path);
+CHM_CHECK int chm_bp_validate(const char* path);
 
 /* Join the backplane at `path` (NULL: default) as RTPU `rtpu`
  * (0..slots-1; 0 is the host server), named `name` (NULL: "rtpu<n>").
@@ -120,13 +122,13 @@ int chm_bp_validate(const char* path);
  * registry entry's payload: see chm_err_last, which names the field);
  * -ETIMEDOUT a recovery of that slot by another
  * process did not finish within 5 s; other -errno from open/mmap. */
-int chm_bp_join(const char* path, int rtpu, const char* name);
+CHM_CHECK int chm_bp_join(const char* path, int rtpu, const char* name);
 
 /* Attach an ordinary program as a host process: it takes the highest free
  * slot (RTPU numbers count up from 1, hosts fill from the top). *slot_out
  * (may be NULL) receives the slot. Errors as chm_bp_join, and -ENOSPC when
  * every slot belongs to a live process. */
-int chm_bp_attach_host(const char* path, const char* name, int* slot_out);
+CHM_CHECK int chm_bp_attach_host(const char* path, const char* name, int* slot_out);
 
 /* Leave cleanly: stop the monitor thread, drop this process's shared
  * memory attachments, mark the slot FREE and unmap. Objects created by
@@ -135,10 +137,10 @@ int chm_bp_attach_host(const char* path, const char* name, int* slot_out);
  * that is killed or calls _exit() is recovered as dead by the others.
  * No other thread of the process may use the backplane meanwhile.
  * Errors: -ENOTCONN not attached. */
-int chm_bp_leave(void);
+CHM_CHECK int chm_bp_leave(void);
 
 /* This process's slot, or -ENOTCONN. */
-int chm_bp_self(void);
+CHM_CHECK int chm_bp_self(void);
 
 /* What the last failing chm_bp_* / chm_shm_* call of this thread said, or
  * "" when none failed yet.
@@ -160,7 +162,7 @@ const char* chm_bp_last_error(void);
  * raised: -ETIMEDOUT, -EAGAIN, -EINTR, -EOWNERDEAD, -EIDRM, -EOVERFLOW,
  * -EBUSY and -EDEADLK. Host threads (not tasks) always get the status.
  * Returns the module's id (registered on first use) or a negative status. */
-int chm_ipc_err_module(void);
+CHM_CHECK int chm_ipc_err_module(void);
 
 enum chm_bp_slot_state {
     CHM_BP_FREE = 0, CHM_BP_JOINING = 1, CHM_BP_RUNNING = 2, CHM_BP_LEAVING = 3,
@@ -192,7 +194,7 @@ typedef struct chm_bp_status {
 
 /* Snapshot of the attached backplane's RTPU table and usage (racy by
  * nature: each slot is read once). Errors: -EINVAL NULL; -ENOTCONN. */
-int chm_bp_status(chm_bp_status_t* out);
+CHM_CHECK int chm_bp_status(chm_bp_status_t* out);
 
 /* Kinds of named objects (chm_bp_object_t.kind). */
 enum chm_bp_object_kind {
@@ -223,7 +225,7 @@ typedef struct chm_bp_object {
  * objects created or destroyed meanwhile may be missed.
  * Errors: -EINVAL max < 0, or out NULL with max > 0; -ENOTCONN not
  * attached. */
-int chm_bp_objects(chm_bp_object_t* out, int max, int* total);
+CHM_CHECK int chm_bp_objects(chm_bp_object_t* out, int max, int* total);
 
 #ifdef __cplusplus
 }

@@ -25,6 +25,7 @@
 #include "chimera/servo.h"
 #include "chimera/shm.h"
 #include "chimera/spin.h"
+#include "chimera/status.h"
 #include "chimera/svar.h"
 #include "chimera/task.h"
 #include "chimera/usig.h"

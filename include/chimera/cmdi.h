@@ -40,6 +40,8 @@
 #ifndef CHIMERA_CMDI_H
 #define CHIMERA_CMDI_H
 
+#include "chimera/status.h"
+
 #include <stddef.h>
 #include <stdio.h>
 
@@ -76,7 +78,7 @@ const char* chm_cmdi_last_error(const chm_cmdi_t* c);
 /* For commands: set the last-error text to the printf-formatted message
  * and return `status` (so `return chm_cmdi_error(c, -ERANGE, "...")`).
  * Returns -EINVAL for NULL c or fmt. */
-int chm_cmdi_error(chm_cmdi_t* c, int status, const char* fmt, ...)
+CHM_CHECK int chm_cmdi_error(chm_cmdi_t* c, int status, const char* fmt, ...)
 #if defined(__GNUC__)
     __attribute__((format(printf, 3, 4)))
 #endif
@@ -89,14 +91,14 @@ int chm_cmdi_error(chm_cmdi_t* c, int status, const char* fmt, ...)
  * `help` lists (NULL: none). The strings are copied. Errors: -EINVAL NULL
  * c or fn, or a bad name (the message says what is wrong with it);
  * -EEXIST a command of that name exists (built-ins included); -ENOMEM. */
-int chm_cmdi_add(chm_cmdi_t* c, const char* name, chm_cmdi_fn fn, void* user, const char* usage,
+CHM_CHECK int chm_cmdi_add(chm_cmdi_t* c, const char* name, chm_cmdi_fn fn, void* user, const char* usage,
                  const char* help);
 
 /* Where commands' output (chm_cmdi_printf), help, history and the errors
  * chm_cmdi_loop prints go, and where a shell escape's stdout and stderr
  * go when `out` has a file descriptor (NULL: stdout, the default). The
  * stream stays the caller's. Errors: -EINVAL NULL c. */
-int chm_cmdi_set_output(chm_cmdi_t* c, FILE* out);
+CHM_CHECK int chm_cmdi_set_output(chm_cmdi_t* c, FILE* out);
 
 /* printf to the output stream. Returns the number of bytes written, or
  * -EINVAL (NULL c or fmt) or -EIO (the stream failed). */
@@ -108,12 +110,12 @@ int chm_cmdi_printf(chm_cmdi_t* c, const char* fmt, ...)
 
 /* Allow (on = 1) or refuse (0, the default) the shell escape "!cmd".
  * Errors: -EINVAL NULL c or on not 0/1. */
-int chm_cmdi_allow_shell(chm_cmdi_t* c, int on);
+CHM_CHECK int chm_cmdi_allow_shell(chm_cmdi_t* c, int on);
 
 /* Scripts stop at their first failing line (on = 0, the default) or go on
  * (1), printing each failure to the output stream and returning the
  * first one's status. Errors: -EINVAL NULL c or on not 0/1. */
-int chm_cmdi_keep_going(chm_cmdi_t* c, int on);
+CHM_CHECK int chm_cmdi_keep_going(chm_cmdi_t* c, int on);
 
 /* Where `help TOPIC` finds longer help (NULL: nowhere, the default). A
  * directory: the file TOPIC.help in it. A file: its section for TOPIC,
@@ -121,7 +123,7 @@ int chm_cmdi_keep_going(chm_cmdi_t* c, int on);
  * printed after the command's usage and help; a topic that is not a
  * command may have help of its own. Checked now: Errors: -EINVAL NULL c;
  * -ENOENT no such file or directory; other -errno of stat. */
-int chm_cmdi_help_path(chm_cmdi_t* c, const char* path);
+CHM_CHECK int chm_cmdi_help_path(chm_cmdi_t* c, const char* path);
 
 /* The command name closest to `word`, copied into buf (len bytes, NUL
  * included). Closeness is the Damerau-Levenshtein distance (optimal string
@@ -131,7 +133,7 @@ int chm_cmdi_help_path(chm_cmdi_t* c, const char* path);
  * equally close names: the nearest in length, then the alphabetically
  * first. Errors: -EINVAL NULL argument; -ENOENT no name is
  * close enough; -ENAMETOOLONG it does not fit. */
-int chm_cmdi_suggest(chm_cmdi_t* c, const char* word, char* buf, size_t len);
+CHM_CHECK int chm_cmdi_suggest(chm_cmdi_t* c, const char* word, char* buf, size_t len);
 
 /* Parse and run one line (a blank or comment line does nothing and
  * returns 0). Returns the command's status, the shell's exit status for
@@ -143,7 +145,7 @@ int chm_cmdi_suggest(chm_cmdi_t* c, const char* word, char* buf, size_t len);
  * running lines nested 32 deep; -ENOMEM. When a
  * command fails without calling chm_cmdi_error the message says which
  * command returned what. */
-int chm_cmdi_run_line(chm_cmdi_t* c, const char* line);
+CHM_CHECK int chm_cmdi_run_line(chm_cmdi_t* c, const char* line);
 
 /* Run `len` bytes of text (need not end in NUL) as a script named `name`
  * (NULL: "<string>"): line by line ('\n' ends a line, a '\r' before it is
@@ -154,20 +156,20 @@ int chm_cmdi_run_line(chm_cmdi_t* c, const char* line);
  * Errors besides a line's: -EINVAL NULL c, or text NULL with len > 0, or
  * a NUL byte in a line; -ELOOP scripts nested deeper than
  * CHM_CMDI_SOURCE_DEPTH. */
-int chm_cmdi_run_text(chm_cmdi_t* c, const char* text, size_t len, const char* name);
+CHM_CHECK int chm_cmdi_run_text(chm_cmdi_t* c, const char* text, size_t len, const char* name);
 
 /* Run the script file at `path` (at most 16 MiB, a regular file: not a
  * device or pipe that could block or never end), as chm_cmdi_run_text
  * naming it by `path`; `source FILE` does this. A relative path is
  * relative to the working directory. Errors besides a line's: -EINVAL;
  * -ENOENT; -EACCES; -EISDIR; -EFBIG; other -errno of open/read; -ELOOP. */
-int chm_cmdi_run_script(chm_cmdi_t* c, const char* path);
+CHM_CHECK int chm_cmdi_run_script(chm_cmdi_t* c, const char* path);
 
 /* Add a line to the history (blank lines and a repeat of the last entry
  * are not added; beyond CHM_CMDI_HISTORY_MAX the oldest entry goes).
  * Interactive sessions add each line they read. Errors: -EINVAL NULL
  * argument or a line holding '\n'; -ENOMEM. */
-int chm_cmdi_history_add(chm_cmdi_t* c, const char* line);
+CHM_CHECK int chm_cmdi_history_add(chm_cmdi_t* c, const char* line);
 
 /* Keep the history in the file at `path`: its lines are added to the
  * history now (a missing file is an empty history), and the history is
@@ -175,12 +177,12 @@ int chm_cmdi_history_add(chm_cmdi_t* c, const char* line);
  * chm_cmdi_interactive_end call. One entry per line, plain text.
  * Errors: -EINVAL NULL or empty path; the errors of reading it as for
  * chm_cmdi_run_script (message "history file: ..."). */
-int chm_cmdi_history_file(chm_cmdi_t* c, const char* path);
+CHM_CHECK int chm_cmdi_history_file(chm_cmdi_t* c, const char* path);
 
 /* Write the history to the file of chm_cmdi_history_file (replacing it
  * whole, by renaming a temporary file beside it). Errors: -EINVAL NULL c;
  * -ENOENT no history file was set; other -errno of writing it. */
-int chm_cmdi_history_save(chm_cmdi_t* c);
+CHM_CHECK int chm_cmdi_history_save(chm_cmdi_t* c);
 
 /* Returns 1 when the library was built with libedit (line editing, tab
  * completion), 0 when interactive sessions read plain lines. Never fails. */
@@ -193,7 +195,7 @@ int chm_cmdi_has_line_editing(void);
  * of file names after the first word). Saves the history when a file was
  * set. Returns 0, or: -EINVAL NULL c; -EBUSY another session is running;
  * -EIO reading stdin failed; the errors of chm_cmdi_history_save. */
-int chm_cmdi_loop(chm_cmdi_t* c, const char* prompt);
+CHM_CHECK int chm_cmdi_loop(chm_cmdi_t* c, const char* prompt);
 
 /* The same session driven by the caller, for a program that also waits on
  * other descriptors (the console prints remote tasks' output while the
@@ -205,26 +207,26 @@ int chm_cmdi_loop(chm_cmdi_t* c, const char* prompt);
  * step returns 0 while the session goes on, 1 once it is over (quit or
  * end of input; call end), or -EINVAL (no session of c), -EIO. Errors of
  * lines are printed, as by chm_cmdi_loop, not returned. */
-int chm_cmdi_interactive_begin(chm_cmdi_t* c, const char* prompt);
-int chm_cmdi_interactive_step(chm_cmdi_t* c);
+CHM_CHECK int chm_cmdi_interactive_begin(chm_cmdi_t* c, const char* prompt);
+CHM_CHECK int chm_cmdi_interactive_step(chm_cmdi_t* c);
 
 /* Print `text` (a newline is added when it lacks one) to stdout above the
  * line being edited, which is redrawn after it (with libedit; plain
  * reading shows the prompt again, the half-typed line stays with the
  * terminal); outside a session of c, print it to the output stream.
  * Errors: -EINVAL NULL argument; -EIO. */
-int chm_cmdi_print_async(chm_cmdi_t* c, const char* text);
+CHM_CHECK int chm_cmdi_print_async(chm_cmdi_t* c, const char* text);
 
 /* End c's interactive session: restore the terminal, save the history
  * (when a file was set). Errors: -EINVAL NULL c or no session of c; the
  * errors of chm_cmdi_history_save (the session is ended all the same). */
-int chm_cmdi_interactive_end(chm_cmdi_t* c);
+CHM_CHECK int chm_cmdi_interactive_end(chm_cmdi_t* c);
 
 /* Ask the session (or the script) running c's lines to stop after the
  * current line, as the built-in quit does; called between lines, the
  * next chm_cmdi_interactive_step returns 1 without reading. Errors:
  * -EINVAL NULL c. */
-int chm_cmdi_quit(chm_cmdi_t* c);
+CHM_CHECK int chm_cmdi_quit(chm_cmdi_t* c);
 
 #ifdef __cplusplus
 }

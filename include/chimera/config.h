@@ -29,6 +29,8 @@
 #ifndef CHIMERA_CONFIG_H
 #define CHIMERA_CONFIG_H
 
+#include "chimera/status.h"
+
 #include <stddef.h>
 #include <stdint.h>
 
@@ -56,12 +58,12 @@ enum chm_config_type {
  * -EACCES; -EISDIR; -EFBIG larger than 16 MiB; -EBADMSG a syntax error or
  * invalid UTF-8 (the message gives path:line:column and what is wrong);
  * -ENOMEM; other -errno from open/read. */
-int chm_config_open(const char* path, chm_config_t** out);
+CHM_CHECK int chm_config_open(const char* path, chm_config_t** out);
 
 /* Parse `len` bytes of TOML at `text` (need not end in NUL) named `name`
  * in messages (NULL: "<string>"). Errors: -EINVAL NULL text or out;
  * -EBADMSG a syntax error (name:line:column and what is wrong); -ENOMEM. */
-int chm_config_parse(const char* text, size_t len, const char* name, chm_config_t** out);
+CHM_CHECK int chm_config_parse(const char* text, size_t len, const char* name, chm_config_t** out);
 
 /* Free a document (NULL: nothing). */
 void chm_config_close(chm_config_t* cfg);
@@ -79,20 +81,20 @@ const char* chm_config_last_error(void);
  * when absent). Errors: -EINVAL NULL argument or malformed path;
  * -EBADMSG a step of the path goes through a value that is not a table
  * (or not an array, for an index). */
-int chm_config_type(const chm_config_t* cfg, const char* key);
+CHM_CHECK int chm_config_type(const chm_config_t* cfg, const char* key);
 
 /* *n = the number of elements of the array, or of keys of the table, at
  * `key`; 0 when absent, so a missing [[module]] list is an empty one.
  * Errors: -EINVAL; -EBADMSG the value is neither an array nor a table, or
  * a step of the path is not a container. */
-int chm_config_count(const chm_config_t* cfg, const char* key, size_t* n);
+CHM_CHECK int chm_config_count(const chm_config_t* cfg, const char* key, size_t* n);
 
 /* Copy the name of the index-th key of the table at `table` (in document
  * order) into buf (len bytes, NUL included). Errors: -EINVAL;
  * -ENOENT the table is absent or has index keys or fewer; -EBADMSG
  * `table` is not a table; -ENAMETOOLONG the key does not fit (the message
  * names it and its place). */
-int chm_config_key(const chm_config_t* cfg, const char* table, size_t index, char* buf,
+CHM_CHECK int chm_config_key(const chm_config_t* cfg, const char* table, size_t index, char* buf,
                    size_t len);
 
 /* Refuse keys of the table at `table` that are not among the n names in
@@ -101,20 +103,20 @@ int chm_config_key(const chm_config_t* cfg, const char* table, size_t index, cha
  * in document order is reported with its line and column, and the closest
  * allowed name when one is near. Errors: -EINVAL; -EBADMSG an unknown key,
  * or `table` is not a table. */
-int chm_config_check_keys(const chm_config_t* cfg, const char* table, const char* const* allowed,
+CHM_CHECK int chm_config_check_keys(const chm_config_t* cfg, const char* table, const char* const* allowed,
                           size_t n);
 
 /* Write "name:line:column" of the value at `key` into buf; for an absent
  * key, of the table (or array) that should hold it. For callers that find
  * a document wrong in ways only they can judge. Errors: -EINVAL;
  * -EBADMSG a step of the path is not a container; -ENAMETOOLONG. */
-int chm_config_where(const chm_config_t* cfg, const char* key, char* buf, size_t len);
+CHM_CHECK int chm_config_where(const chm_config_t* cfg, const char* key, char* buf, size_t len);
 
 /* Report a caller's own finding about the value at `key` in the house
  * format: sets chm_err_last() to "name:line:column: key: " and
  * the printf-formatted message, and returns -EBADMSG (or -EINVAL for a
  * NULL or malformed argument). */
-int chm_config_error(const chm_config_t* cfg, const char* key, const char* fmt, ...)
+CHM_CHECK int chm_config_error(const chm_config_t* cfg, const char* key, const char* fmt, ...)
 #if defined(__GNUC__)
     __attribute__((format(printf, 3, 4)))
 #endif
@@ -123,16 +125,16 @@ int chm_config_error(const chm_config_t* cfg, const char* key, const char* fmt, 
 /* Booleans: TOML true or false, nothing else (no 0/1, no "yes"). *out is
  * 1 or 0. get: `def` (0 or 1) when absent. Errors: -EINVAL; -EBADMSG
  * another type; require: -ENOENT when absent. */
-int chm_config_get_bool(const chm_config_t* cfg, const char* key, int def, int* out);
-int chm_config_require_bool(const chm_config_t* cfg, const char* key, int* out);
+CHM_CHECK int chm_config_get_bool(const chm_config_t* cfg, const char* key, int def, int* out);
+CHM_CHECK int chm_config_require_bool(const chm_config_t* cfg, const char* key, int* out);
 
 /* Integers in [min, max]. A float, even 2.0, is refused: where an integer
  * is wanted a fraction is a mistake. Errors: -EINVAL (also min > max, or
  * def outside [min, max]); -EBADMSG another type or out of range;
  * require: -ENOENT when absent. */
-int chm_config_get_int64(const chm_config_t* cfg, const char* key, int64_t def, int64_t min,
+CHM_CHECK int chm_config_get_int64(const chm_config_t* cfg, const char* key, int64_t def, int64_t min,
                          int64_t max, int64_t* out);
-int chm_config_require_int64(const chm_config_t* cfg, const char* key, int64_t min, int64_t max,
+CHM_CHECK int chm_config_require_int64(const chm_config_t* cfg, const char* key, int64_t min, int64_t max,
                              int64_t* out);
 
 /* Numbers in [min, max] (pass -INFINITY/INFINITY for no bound): a TOML
@@ -140,9 +142,9 @@ int chm_config_require_int64(const chm_config_t* cfg, const char* key, int64_t m
  * NaN is always refused. Errors: -EINVAL (also NaN or min > max bounds, a
  * def outside them); -EBADMSG another type, NaN, or out of range;
  * require: -ENOENT when absent. */
-int chm_config_get_double(const chm_config_t* cfg, const char* key, double def, double min,
+CHM_CHECK int chm_config_get_double(const chm_config_t* cfg, const char* key, double def, double min,
                           double max, double* out);
-int chm_config_require_double(const chm_config_t* cfg, const char* key, double min, double max,
+CHM_CHECK int chm_config_require_double(const chm_config_t* cfg, const char* key, double min, double max,
                               double* out);
 
 /* Strings, copied with their NUL into buf (len bytes): a string longer
@@ -150,17 +152,17 @@ int chm_config_require_double(const chm_config_t* cfg, const char* key, double m
  * field's size is part of its type). get: `def` (NULL: "") when absent,
  * which must fit too. Errors: -EINVAL (NULL buf, len 0, def too long);
  * -EBADMSG another type, too long, or a NUL inside; require: -ENOENT. */
-int chm_config_get_string(const chm_config_t* cfg, const char* key, const char* def, char* buf,
+CHM_CHECK int chm_config_get_string(const chm_config_t* cfg, const char* key, const char* def, char* buf,
                           size_t len);
-int chm_config_require_string(const chm_config_t* cfg, const char* key, char* buf, size_t len);
+CHM_CHECK int chm_config_require_string(const chm_config_t* cfg, const char* key, char* buf, size_t len);
 
 /* A string that must be one of the n names in `choices`: *out receives its
  * index. get: `def` (an index below n) when absent. Errors: -EINVAL (also
  * n == 0, a NULL choice, def >= n); -EBADMSG another type or another
  * string (the message lists the choices); require: -ENOENT. */
-int chm_config_get_choice(const chm_config_t* cfg, const char* key, const char* const* choices,
+CHM_CHECK int chm_config_get_choice(const chm_config_t* cfg, const char* key, const char* const* choices,
                           size_t n, size_t def, size_t* out);
-int chm_config_require_choice(const chm_config_t* cfg, const char* key,
+CHM_CHECK int chm_config_require_choice(const chm_config_t* cfg, const char* key,
                               const char* const* choices, size_t n, size_t* out);
 
 /* A flat array of min_n..max_n numbers (integers or floats), each in
@@ -170,12 +172,12 @@ int chm_config_require_choice(const chm_config_t* cfg, const char* key,
  * min_n > max_n, bad bounds); -EBADMSG not an array, too few or too many
  * elements, an element of another type or out of range (the message
  * names the element, e.g. gains[3], and its place); -ENOENT. */
-int chm_config_get_doubles(const chm_config_t* cfg, const char* key, double lo, double hi,
+CHM_CHECK int chm_config_get_doubles(const chm_config_t* cfg, const char* key, double lo, double hi,
                            size_t min_n, size_t max_n, double* out, size_t* n);
 
 /* The same for integers in [lo, hi] (floats refused). Errors: as
  * chm_config_get_doubles. */
-int chm_config_get_int64s(const chm_config_t* cfg, const char* key, int64_t lo, int64_t hi,
+CHM_CHECK int chm_config_get_int64s(const chm_config_t* cfg, const char* key, int64_t lo, int64_t hi,
                           size_t min_n, size_t max_n, int64_t* out, size_t* n);
 
 #ifdef __cplusplus

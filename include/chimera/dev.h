@@ -21,6 +21,8 @@
 #ifndef CHIMERA_DEV_H
 #define CHIMERA_DEV_H
 
+#include "chimera/status.h"
+
 #include <errno.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -94,21 +96,21 @@ typedef struct chm_dev_ops {
  * chm_dev_unregister; `ctx` is handed to ops->open.
  * Errors: CHM_EDEV_INVAL (NULL, empty name, no open/close);
  * -ENAMETOOLONG; CHM_EDEV_EXIST; -ENOSPC (CHM_DEV_MAX_DEVICES reached). */
-int chm_dev_register(const char* name, const chm_dev_ops_t* ops, void* ctx);
+CHM_CHECK int chm_dev_register(const char* name, const chm_dev_ops_t* ops, void* ctx);
 
 /* Remove a driver. Errors: CHM_EDEV_NODEV; CHM_EDEV_BUSY while a
  * descriptor on it is open (nothing is changed). */
-int chm_dev_unregister(const char* name);
+CHM_CHECK int chm_dev_unregister(const char* name);
 
 /* Open the device `name`. Returns a descriptor (>= 256) owned by the
  * calling task (chm_task_self(); CHM_TID_NONE outside a task).
  * Errors: CHM_EDEV_NODEV; CHM_EDEV_INVAL (NULL name, no direction or
  * unknown flags); CHM_EDEV_MFILE; or the driver's open status. */
-int chm_dev_open(const char* name, int flags);
+CHM_CHECK int chm_dev_open(const char* name, int flags);
 
 /* Close a descriptor. The driver's close runs once the last call still in
  * progress on it returns. Errors: CHM_EDEV_BADF (also on a second close). */
-int chm_dev_close(int dd);
+CHM_CHECK int chm_dev_close(int dd);
 
 /* Read / write at the descriptor's position and advance it (stream
  * devices: no position). Returns bytes moved (a transfer that crosses the
@@ -116,35 +118,35 @@ int chm_dev_close(int dd);
  * (not opened for that direction), CHM_EDEV_RANGE (position at or past the
  * end of the range), CHM_EDEV_NOTSUP, CHM_EDEV_INVAL (NULL buffer), -EAGAIN
  * (non-blocking, nothing ready) or the driver's status. */
-int64_t chm_dev_read(int dd, void* buf, size_t n);
-int64_t chm_dev_write(int dd, const void* buf, size_t n);
+CHM_CHECK int64_t chm_dev_read(int dd, void* buf, size_t n);
+CHM_CHECK int64_t chm_dev_write(int dd, const void* buf, size_t n);
 
 /* As read / write at offset `off`, leaving the position alone. */
-int64_t chm_dev_pread(int dd, void* buf, size_t n, uint64_t off);
-int64_t chm_dev_pwrite(int dd, const void* buf, size_t n, uint64_t off);
+CHM_CHECK int64_t chm_dev_pread(int dd, void* buf, size_t n, uint64_t off);
+CHM_CHECK int64_t chm_dev_pwrite(int dd, const void* buf, size_t n, uint64_t off);
 
 /* Move the position (whence: SEEK_SET, SEEK_CUR, SEEK_END). Returns the
  * new position. Errors: CHM_EDEV_BADF; CHM_EDEV_NOTSUP on a stream device;
  * CHM_EDEV_RANGE for a position below 0 or past the end of the range;
  * CHM_EDEV_INVAL bad whence. */
-int64_t chm_dev_lseek(int dd, int64_t off, int whence);
+CHM_CHECK int64_t chm_dev_lseek(int dd, int64_t off, int whence);
 
 /* Device control. Errors: CHM_EDEV_BADF; CHM_EDEV_NOTTY (request unknown
  * to the device; also for a device without ioctl); or the driver's. */
-int chm_dev_ioctl(int dd, unsigned long req, void* arg);
+CHM_CHECK int chm_dev_ioctl(int dd, unsigned long req, void* arg);
 
 /* Map [off, off+len) of the device's register space into memory; *addr
  * receives the address. Unmapped by chm_dev_munmap or at close.
  * Errors: CHM_EDEV_BADF; CHM_EDEV_NOTSUP; CHM_EDEV_RANGE (off+len past the
  * range, or len 0); CHM_EDEV_ACCES (write mapping of a read-only
  * descriptor); CHM_EDEV_INVAL; -ENOSPC (8 mappings per descriptor). */
-int chm_dev_mmap(int dd, uint64_t off, size_t len, int prot, void** addr);
+CHM_CHECK int chm_dev_mmap(int dd, uint64_t off, size_t len, int prot, void** addr);
 /* Errors: CHM_EDEV_BADF; CHM_EDEV_INVAL (not a mapping of this descriptor). */
-int chm_dev_munmap(int dd, void* addr, size_t len);
+CHM_CHECK int chm_dev_munmap(int dd, void* addr, size_t len);
 
 /* The readable-on-event file descriptor of the device (CHM_DEV_IOC_EVENT_FD).
  * Returns it (>= 0), or CHM_EDEV_BADF / CHM_EDEV_NOTTY. */
-int chm_dev_event_fd(int dd);
+CHM_CHECK int chm_dev_event_fd(int dd);
 
 /* Name of the device behind a descriptor (valid while it is open), or NULL. */
 const char* chm_dev_name(int dd);
@@ -157,7 +159,7 @@ int chm_dev_task_abort(chm_tid_t task);
 
 /* Safe-stop every open actuator of the RTPU (fail-stop, shutdown). Returns
  * how many were stopped. */
-int chm_dev_safe_stop_all(void);
+CHM_CHECK int chm_dev_safe_stop_all(void);
 
 /* Returns the number of open descriptors (tests: nothing leaked). Never
  * fails. */
@@ -176,7 +178,7 @@ const char* chm_dev_last_error(void);
  * makes the call return its status as when handling is off. Outcomes
  * (-EAGAIN, -ETIMEDOUT, -EINTR) and CHM_ACT_CLAMPED are never raised.
  * Returns the module's id (registered on first use) or a negative status. */
-int chm_dev_err_module(void);
+CHM_CHECK int chm_dev_err_module(void);
 
 /* Short text for a status ("no such device", ...). */
 const char* chm_dev_strerror(int status);

@@ -33,6 +33,8 @@
 #ifndef CHIMERA_ERR_H
 #define CHIMERA_ERR_H
 
+#include "chimera/status.h"
+
 #include <setjmp.h>
 #include <stddef.h>
 #include <stdint.h>
@@ -88,9 +90,9 @@ typedef struct chm_err_code {
  * Errors: -EINVAL NULL or empty name, a name too long, codes NULL with
  * ncodes > 0, a code <= 0; -EEXIST a module of that name exists;
  * -ENOSPC CHM_ERR_MODULES_MAX modules already. */
-int chm_err_module_register(const char* name, const chm_err_code_t* codes, size_t ncodes);
+CHM_CHECK int chm_err_module_register(const char* name, const chm_err_code_t* codes, size_t ncodes);
 /* The id of the module called `name`. Errors: -ENOENT; -EINVAL NULL. */
-int chm_err_module_find(const char* name);
+CHM_CHECK int chm_err_module_find(const char* name);
 /* A module's name, or NULL for an unknown id. Any context. */
 const char* chm_err_module_name(int module);
 /* The message of (module, code): the module's table, else strerror() for
@@ -168,9 +170,9 @@ chm_err_action_t chm_err_default_handler(const chm_err_info_t* info, void* arg);
  * (module, code), for a whole module, or for all its errors.
  * Errors: -EPERM not in a task; -EINVAL unknown module or code <= 0;
  * -ENOSPC 32 code and module handlers already; -ENOMEM. */
-int chm_err_on_code(int module, int code, chm_err_handler_t h, void* arg);
-int chm_err_on_module(int module, chm_err_handler_t h, void* arg);
-int chm_err_on_task(chm_err_handler_t h, void* arg);
+CHM_CHECK int chm_err_on_code(int module, int code, chm_err_handler_t h, void* arg);
+CHM_CHECK int chm_err_on_module(int module, chm_err_handler_t h, void* arg);
+CHM_CHECK int chm_err_on_task(chm_err_handler_t h, void* arg);
 
 /* A scope: a region of code with its own handler, nestable. The scope
  * object lives in the caller (its stack) until it is popped. */
@@ -180,10 +182,10 @@ typedef struct chm_err_scope {
 /* Enter a scope: `h` sees every error signal raised in the task until the
  * matching pop (before any code, module or task handler).
  * Errors: -EPERM not in a task; -EINVAL NULL; -ENOMEM. */
-int chm_err_scope_push(chm_err_scope_t* scope, chm_err_handler_t h, void* arg);
+CHM_CHECK int chm_err_scope_push(chm_err_scope_t* scope, chm_err_handler_t h, void* arg);
 /* Leave the innermost scope, which must be `scope`. Errors: -EPERM; -EINVAL
  * not the innermost scope. */
-int chm_err_scope_pop(chm_err_scope_t* scope);
+CHM_CHECK int chm_err_scope_pop(chm_err_scope_t* scope);
 
 /* ---------------------------------------------------------------- marks */
 
@@ -209,7 +211,7 @@ typedef struct chm_err_mark {
 jmp_buf* chm_err_mark_arm_(chm_err_mark_t* m); /* for the macro */
 /* Remove mark `m` (and any marks set after it). Errors: -EPERM; -EINVAL
  * not a mark of this task. */
-int chm_err_unmark(chm_err_mark_t* m);
+CHM_CHECK int chm_err_unmark(chm_err_mark_t* m);
 /* Return to mark `m` of the calling task with `code` (> 0) as the value of
  * its chm_err_mark. Does not return; with `m` not a live mark of the task,
  * the task is aborted with a kernel EINVAL line. */
@@ -232,7 +234,7 @@ void chm_err_jump(chm_err_mark_t* m, int code)
  * just returned. A call whose handler continued returns its status as
  * when off. Returns the previous setting. Errors: -EPERM not in a task;
  * -ENOMEM. */
-int chm_err_global(int on);
+CHM_CHECK int chm_err_global(int on);
 /* Returns the calling task's setting (0 outside a task). Never fails. */
 int chm_err_global_get(void);
 
@@ -242,24 +244,24 @@ int chm_err_global_get(void);
  * kept across the handler. A failure also leaves chm_err_last() naming the
  * call, its path (open) and the cause. Also usable outside tasks (never
  * raising). Errors: those of the libc call, in errno. */
-int chm_unix_open(const char* path, int flags, ...);
-int chm_unix_close(int fd);
-ssize_t chm_unix_read(int fd, void* buf, size_t n);
-ssize_t chm_unix_write(int fd, const void* buf, size_t n);
+CHM_CHECK int chm_unix_open(const char* path, int flags, ...);
+CHM_CHECK int chm_unix_close(int fd);
+CHM_CHECK ssize_t chm_unix_read(int fd, void* buf, size_t n);
+CHM_CHECK ssize_t chm_unix_write(int fd, const void* buf, size_t n);
 off_t chm_unix_lseek(int fd, off_t off, int whence);
-int chm_unix_ioctl(int fd, unsigned long request, ...);
+CHM_CHECK int chm_unix_ioctl(int fd, unsigned long request, ...);
 /* chm_malloc (chimera/mem.h) whose NULL raises "unix" ENOMEM when on. */
 void* chm_unix_malloc(size_t size);
 
 /* The names before API 1.0 (chm_open beside chm_dev_open read as the same
  * subsystem): the same calls, kept for one release (CHANGELOG.md). Errors:
  * as chm_unix_open and the others. */
-int chm_open(const char* path, int flags, ...);
-int chm_close(int fd);
-ssize_t chm_read(int fd, void* buf, size_t n);
-ssize_t chm_write(int fd, const void* buf, size_t n);
+CHM_CHECK int chm_open(const char* path, int flags, ...);
+CHM_CHECK int chm_close(int fd);
+CHM_CHECK ssize_t chm_read(int fd, void* buf, size_t n);
+CHM_CHECK ssize_t chm_write(int fd, const void* buf, size_t n);
 off_t chm_lseek(int fd, off_t off, int whence);
-int chm_ioctl(int fd, unsigned long request, ...);
+CHM_CHECK int chm_ioctl(int fd, unsigned long request, ...);
 void* chm_malloc_checked(size_t size);
 
 /* ------------------------------------------------------------- last error */

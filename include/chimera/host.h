@@ -9,6 +9,8 @@
 #ifndef CHIMERA_HOST_H
 #define CHIMERA_HOST_H
 
+#include "chimera/status.h"
+
 #include <stddef.h>
 #include <stdint.h>
 
@@ -29,17 +31,17 @@ uint64_t chm_host_timeout(void);
  * tasks) to `path`, beneath the host server's root; "" or "." stays, ".."
  * goes up but never above the root. Errors: -EINVAL NULL; -EXDEV it leads
  * out of the root; -ENOTDIR; the host's errors (-ENOENT, -EACCES). */
-int chm_host_chdir(const char* path);
+CHM_CHECK int chm_host_chdir(const char* path);
 
 /* This process's working directory, relative to the host server's root
  * ("" at the root), into buf. Errors: -EINVAL buf NULL or len 0;
  * -ERANGE it does not fit. */
-int chm_host_getcwd(char* buf, size_t len);
+CHM_CHECK int chm_host_getcwd(char* buf, size_t len);
 
 /* The host server's environment variable `name` into buf (NUL-terminated).
  * Returns its length. Errors: -EINVAL bad name (empty, '='); -ENOENT not
  * set; -ERANGE it does not fit in `len` bytes. */
-int chm_host_getenv(const char* name, char* buf, size_t len);
+CHM_CHECK int chm_host_getenv(const char* name, char* buf, size_t len);
 
 /* Run the host program argv[0] (searched in the host server's PATH) with
  * arguments argv[1..argc-1], in this process's host working directory,
@@ -51,7 +53,7 @@ int chm_host_getenv(const char* name, char* buf, size_t len);
  * Errors: -EINVAL argc < 1 or argv NULL; -E2BIG the vector does not fit
  * one request; -EPERM argv[0] is a shell and shells are not allowed;
  * -ENOENT no such program; -EACCES not executable. */
-int chm_host_run(int argc, const char* const* argv, int* status);
+CHM_CHECK int chm_host_run(int argc, const char* const* argv, int* status);
 
 #ifdef __cplusplus
 }

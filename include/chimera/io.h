@@ -23,6 +23,8 @@
 #ifndef CHIMERA_IO_H
 #define CHIMERA_IO_H
 
+#include "chimera/status.h"
+
 #include <stdint.h>
 
 #include "chimera/kernel.h" /* CHM_FOREVER, CHM_NO_WAIT */
@@ -43,7 +45,7 @@ struct pollfd;
  * Task context; elsewhere it is an ordinary poll(2).
  * Errors: -EINTR a user signal interrupted the wait; -EINVAL more than 1024
  * descriptors; -EFAULT fds NULL with nfds > 0; poll's own errors negated. */
-int chm_io_poll(struct pollfd* fds, unsigned long nfds, uint64_t timeout_ns);
+CHM_CHECK int chm_io_poll(struct pollfd* fds, unsigned long nfds, uint64_t timeout_ns);
 
 #ifdef __cplusplus
 }

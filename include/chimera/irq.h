@@ -18,6 +18,8 @@
 #ifndef CHIMERA_IRQ_H
 #define CHIMERA_IRQ_H
 
+#include "chimera/status.h"
+
 #ifdef __cplusplus
 extern "C" {
 #endif
@@ -33,32 +35,32 @@ typedef void (*chm_irq_handler_t)(int vector, void* arg);
  * Kernel thread (before chm_kernel_run) or a task.
  * Errors: -EINVAL vector out of range or handler NULL; -EBUSY a handler is
  * installed already (remove it first); -EPERM no kernel. */
-int chm_irq_install(int vector, chm_irq_handler_t handler, void* arg);
+CHM_CHECK int chm_irq_install(int vector, chm_irq_handler_t handler, void* arg);
 
 /* Remove the handler of `vector` (and its descriptor, if any); raises then
  * stay pending until a handler is installed. Errors: -EINVAL bad vector;
  * -ENOENT no handler installed. */
-int chm_irq_remove(int vector);
+CHM_CHECK int chm_irq_remove(int vector);
 
 /* Disable / enable delivery on `vector`. Raises while disabled stay
  * pending (one pending raise per vector, as on a real line) and are
  * delivered on enable. Errors: -EINVAL bad vector. */
-int chm_irq_disable(int vector);
-int chm_irq_enable(int vector);
+CHM_CHECK int chm_irq_disable(int vector);
+CHM_CHECK int chm_irq_enable(int vector);
 
 /* Raise `vector` from any thread of this process, or from a signal
  * handler. Errors: -EINVAL bad vector. */
-int chm_irq_raise(int vector);
+CHM_CHECK int chm_irq_raise(int vector);
 
 /* Bind line `vector` (32..63) to descriptor `fd`: the line is raised while
  * poll(2) reports any of `events` (or an error/hang-up) on it. An idle
  * RTPU sleeps on the descriptor; a busy one polls it every io_poll_ns.
  * Up to 32 bound descriptors. Errors: -EINVAL not a line vector, fd < 0
  * or events 0; -EBUSY the line already has a descriptor; -ENOSPC. */
-int chm_irq_attach_fd(int vector, int fd, short events);
+CHM_CHECK int chm_irq_attach_fd(int vector, int fd, short events);
 
 /* Unbind the descriptor of line `vector`. Errors: -EINVAL; -ENOENT none. */
-int chm_irq_detach_fd(int vector);
+CHM_CHECK int chm_irq_detach_fd(int vector);
 
 /* Number of times `vector`'s handler ran (statistics, tests). */
 unsigned long chm_irq_count(int vector);

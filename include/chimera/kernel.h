@@ -6,6 +6,8 @@
 #ifndef CHIMERA_KERNEL_H
 #define CHIMERA_KERNEL_H
 
+#include "chimera/status.h"
+
 #include <stddef.h>
 #include <stdint.h>
 
@@ -77,13 +79,13 @@ void chm_kernel_config_init(chm_kernel_config_t* cfg);
  * CHM_SCHED_USER without a complete ops table, quantum_ns or io_poll_ns
  * below 10 µs);
  * -ENOMEM; or the error of timer creation. */
-int chm_kernel_init(const chm_kernel_config_t* cfg);
+CHM_CHECK int chm_kernel_init(const chm_kernel_config_t* cfg);
 
 /* Run the tasks spawned so far (and those they spawn) until every task has
  * ended or chm_kernel_stop() is called. Returns the stop code (0 when all
  * tasks ended). Call on the kernel thread after chm_kernel_init.
  * Errors: -EPERM not initialised or called from a task. */
-int chm_kernel_run(void);
+CHM_CHECK int chm_kernel_run(void);
 
 /* Stop the RTPU gracefully: shutdown hooks run (most recently registered
  * first), then chm_kernel_run returns `code`. Task context. Does not return
@@ -95,7 +97,7 @@ void chm_kernel_stop(int code);
 
 /* Register a hook run by chm_kernel_stop (actuators first: register them
  * last). Up to 32 hooks. Errors: -ENOSPC, -EINVAL for NULL. */
-int chm_kernel_on_shutdown(void (*hook)(void* arg), void* arg);
+CHM_CHECK int chm_kernel_on_shutdown(void (*hook)(void* arg), void* arg);
 
 /* Tear the kernel down after chm_kernel_run returned (tests, embedding):
  * destroys remaining tasks, frees stacks, deletes the timer. */

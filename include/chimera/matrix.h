@@ -52,6 +52,8 @@
 #ifndef CHIMERA_MATRIX_H
 #define CHIMERA_MATRIX_H
 
+#include "chimera/status.h"
+
 #include <stddef.h>
 #include <stdint.h>
 
@@ -93,22 +95,22 @@ typedef struct chm_mat {
 /* A view of rows x cols contiguous doubles at data (stride = cols).
  * Errors: -EINVAL (CHM_EMAT_ARG) m or data NULL, rows or cols 0, or the
  * view larger than the address space. */
-int chm_mat_view(chm_mat_t* m, double* data, uint32_t rows, uint32_t cols);
+CHM_CHECK int chm_mat_view(chm_mat_t* m, double* data, uint32_t rows, uint32_t cols);
 
 /* The same with rows `stride` elements apart (a matrix padded per row, or
  * a block of a larger one). Errors: as chm_mat_view; -EINVAL (ARG) also
  * stride < cols. */
-int chm_mat_view_stride(chm_mat_t* m, double* data, uint32_t rows, uint32_t cols,
+CHM_CHECK int chm_mat_view_stride(chm_mat_t* m, double* data, uint32_t rows, uint32_t cols,
                         uint32_t stride);
 
 /* An n x 1 column vector of n contiguous doubles. Errors: as chm_mat_view. */
-int chm_mat_vector(chm_mat_t* v, double* data, uint32_t n);
+CHM_CHECK int chm_mat_vector(chm_mat_t* v, double* data, uint32_t n);
 
 /* The rows x cols block of m whose top-left element is m(row, col), as a
  * view sharing m's elements and stride. Errors: -EINVAL (ARG) blk NULL, m
  * not a valid view, rows or cols 0; -EINVAL (RANGE) the block reaches
  * outside m. */
-int chm_mat_block(chm_mat_t* blk, const chm_mat_t* m, uint32_t row, uint32_t col, uint32_t rows,
+CHM_CHECK int chm_mat_block(chm_mat_t* blk, const chm_mat_t* m, uint32_t row, uint32_t col, uint32_t rows,
                   uint32_t cols);
 
 /* ------------------------------------------------------ copy and fill */
@@ -116,55 +118,55 @@ int chm_mat_block(chm_mat_t* blk, const chm_mat_t* m, uint32_t row, uint32_t col
 /* dst = src. dst may be exactly src (nothing to do). Errors: -EINVAL (ARG)
  * a view invalid; (DIM) different dimensions; (ALIAS) dst overlaps src
  * without being the same view. */
-int chm_mat_copy(const chm_mat_t* src, const chm_mat_t* dst);
+CHM_CHECK int chm_mat_copy(const chm_mat_t* src, const chm_mat_t* dst);
 
 /* Sub-copy: the rows x cols block of src at (src_row, src_col) into dst at
  * (dst_row, dst_col). Errors: -EINVAL (ARG) a view invalid, rows or cols 0;
  * (RANGE) either block reaches outside its matrix; (ALIAS) the two blocks
  * overlap without being the same elements. */
-int chm_mat_subcopy(const chm_mat_t* src, uint32_t src_row, uint32_t src_col, uint32_t rows,
+CHM_CHECK int chm_mat_subcopy(const chm_mat_t* src, uint32_t src_row, uint32_t src_col, uint32_t rows,
                     uint32_t cols, const chm_mat_t* dst, uint32_t dst_row, uint32_t dst_col);
 
 /* Every element of m set to value. Errors: -EINVAL (ARG) m invalid. */
-int chm_mat_fill(const chm_mat_t* m, double value);
+CHM_CHECK int chm_mat_fill(const chm_mat_t* m, double value);
 
 /* m = I (ones on the diagonal, zeros elsewhere; m need not be square).
  * Errors: -EINVAL (ARG) m invalid. */
-int chm_mat_identity(const chm_mat_t* m);
+CHM_CHECK int chm_mat_identity(const chm_mat_t* m);
 
 /* ------------------------------------------------------- arithmetic */
 
 /* out = a + b, out = a - b, element by element; out may be exactly a or b.
  * Errors: -EINVAL (ARG) a view invalid; (DIM) a, b and out not all of one
  * shape; (ALIAS) out overlaps a or b without being the same view. */
-int chm_mat_add(const chm_mat_t* a, const chm_mat_t* b, const chm_mat_t* out);
-int chm_mat_sub(const chm_mat_t* a, const chm_mat_t* b, const chm_mat_t* out);
+CHM_CHECK int chm_mat_add(const chm_mat_t* a, const chm_mat_t* b, const chm_mat_t* out);
+CHM_CHECK int chm_mat_sub(const chm_mat_t* a, const chm_mat_t* b, const chm_mat_t* out);
 
 /* out = s * a; out may be exactly a. Errors: as chm_mat_add. */
-int chm_mat_scale(const chm_mat_t* a, double s, const chm_mat_t* out);
+CHM_CHECK int chm_mat_scale(const chm_mat_t* a, double s, const chm_mat_t* out);
 
 /* out = a * b: a is m x k, b is k x n, out is m x n. out must not overlap a
  * or b (the product reads every input element many times).
  * Errors: -EINVAL (ARG) a view invalid; (DIM) a's columns differ from b's
  * rows, or out is not m x n; (ALIAS) out overlaps a or b. */
-int chm_mat_mul(const chm_mat_t* a, const chm_mat_t* b, const chm_mat_t* out);
+CHM_CHECK int chm_mat_mul(const chm_mat_t* a, const chm_mat_t* b, const chm_mat_t* out);
 
 /* out = a transposed: a is m x n, out n x m. A square a may be transposed
  * into itself (out exactly a); any other overlap is refused.
  * Errors: -EINVAL (ARG); (DIM) out not n x m; (ALIAS). */
-int chm_mat_transpose(const chm_mat_t* a, const chm_mat_t* out);
+CHM_CHECK int chm_mat_transpose(const chm_mat_t* a, const chm_mat_t* out);
 
 /* *out = a . b: the sum of a[i] * b[i] over two vectors (n x 1 or 1 x n,
  * not necessarily both the same way) of one length n.
  * Errors: -EINVAL (ARG) a view invalid or out NULL; (DIM) a or b not a
  * vector, or of different lengths. */
-int chm_mat_dot(const chm_mat_t* a, const chm_mat_t* b, double* out);
+CHM_CHECK int chm_mat_dot(const chm_mat_t* a, const chm_mat_t* b, double* out);
 
 /* out = a x b for three-element vectors (3 x 1 or 1 x 3 each). Any of the
  * three may overlap: the inputs are read before out is written.
  * Errors: -EINVAL (ARG) a view invalid; (DIM) one of them not a
  * three-element vector. */
-int chm_mat_cross(const chm_mat_t* a, const chm_mat_t* b, const chm_mat_t* out);
+CHM_CHECK int chm_mat_cross(const chm_mat_t* a, const chm_mat_t* b, const chm_mat_t* out);
 
 /* Which norm chm_mat_norm computes. */
 enum chm_mat_norm_kind {
@@ -178,7 +180,7 @@ enum chm_mat_norm_kind {
 /* *out = the norm `kind` of a. The Frobenius norm is computed with scaling,
  * so it neither overflows nor underflows where the result is representable.
  * Errors: -EINVAL (ARG) a invalid, out NULL or kind unknown. */
-int chm_mat_norm(const chm_mat_t* a, enum chm_mat_norm_kind kind, double* out);
+CHM_CHECK int chm_mat_norm(const chm_mat_t* a, enum chm_mat_norm_kind kind, double* out);
 
 /* ------------------------------------------ Gaussian elimination
  *
@@ -208,7 +210,7 @@ int chm_mat_norm(const chm_mat_t* a, enum chm_mat_norm_kind kind, double* out);
  * Errors: -EINVAL (ARG) a invalid or out NULL; (DIM) a not square; (WORK)
  * work NULL, work_len < CHM_MAT_WORK(n), or work overlapping a; -EDOM
  * (NOTFINITE) a holds a NaN or an infinity. */
-int chm_mat_det(const chm_mat_t* a, double* out, double* work, size_t work_len);
+CHM_CHECK int chm_mat_det(const chm_mat_t* a, double* out, double* work, size_t work_len);
 
 /* Solve a * x = b for x: a is n x n, b and x are n x k (k right-hand sides
  * at once). x may be exactly b (b is overwritten by the solution), and may
@@ -218,7 +220,7 @@ int chm_mat_det(const chm_mat_t* a, double* out, double* work, size_t work_len);
  * n x k alike; (ALIAS) x overlaps b without being b; (WORK) as
  * chm_mat_det; -EDOM (SINGULAR) a is singular within the tolerance; -EDOM
  * (NOTFINITE) a or b holds a NaN or an infinity. */
-int chm_mat_solve(const chm_mat_t* a, const chm_mat_t* b, const chm_mat_t* x, double* work,
+CHM_CHECK int chm_mat_solve(const chm_mat_t* a, const chm_mat_t* b, const chm_mat_t* x, double* work,
                   size_t work_len);
 
 /* out = a^-1 for a square a. out may overlap a in any way, exactly a
@@ -226,7 +228,7 @@ int chm_mat_solve(const chm_mat_t* a, const chm_mat_t* b, const chm_mat_t* x, do
  * Errors: -EINVAL (ARG); (DIM) a not square or out not a's size;
  * (WORK) as chm_mat_det; -EDOM (SINGULAR) a is singular within the
  * tolerance; -EDOM (NOTFINITE) a holds a NaN or an infinity. */
-int chm_mat_inverse(const chm_mat_t* a, const chm_mat_t* out, double* work, size_t work_len);
+CHM_CHECK int chm_mat_inverse(const chm_mat_t* a, const chm_mat_t* out, double* work, size_t work_len);
 
 /* ------------------------------------------------------------ errors */
 
@@ -244,7 +246,7 @@ int chm_mat_last_code(void);
  * the CHM_EMAT_* above), or a negative status from chm_err_module_register.
  * Error signals carry call = the failing function's name and detail = the
  * chm_err_last() message after that name. */
-int chm_mat_err_module(void);
+CHM_CHECK int chm_mat_err_module(void);
 
 #ifdef __cplusplus
 }

@@ -17,6 +17,8 @@
 #ifndef CHIMERA_MEM_H
 #define CHIMERA_MEM_H
 
+#include "chimera/status.h"
+
 #include <stddef.h>
 
 #ifdef __cplusplus
@@ -78,11 +80,11 @@ size_t chm_malloc_usable_size(void *p);
  * blocks, the block sizes adding up to the committed memory. Takes time
  * proportional to the number of blocks, holding the heap lock.
  * Returns 0 when consistent, -EFAULT when the heap is corrupt. */
-int chm_mem_check(void);
+CHM_CHECK int chm_mem_check(void);
 
 /* Fill *out with a snapshot of the heap's statistics.
  * Returns 0, or -EINVAL when out is NULL. */
-int chm_mem_stats(struct chm_mem_stats *out);
+CHM_CHECK int chm_mem_stats(struct chm_mem_stats *out);
 
 #ifdef __cplusplus
 }

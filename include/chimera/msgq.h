@@ -40,6 +40,8 @@
 #ifndef CHIMERA_MSGQ_H
 #define CHIMERA_MSGQ_H
 
+#include "chimera/status.h"
+
 #include <stddef.h>
 #include <stdint.h>
 
@@ -111,7 +113,7 @@ void chm_msgq_attr_init(chm_msgq_attr_t* attr);
  * by a process that died in it; -EBADMSG that memory's block chain is
  * corrupt (chm_bp_last_error names the block and field); -ETIMEDOUT a live
  * peer held the registry for more than 5 s. */
-int chm_msgq_create(const char* name, const chm_msgq_attr_t* attr, int where, chm_msgq_t** out);
+CHM_CHECK int chm_msgq_create(const char* name, const chm_msgq_attr_t* attr, int where, chm_msgq_t** out);
 
 /* Open the queue `name` created by any process. Opening twice gives the
  * same handle and needs two closes.
@@ -122,19 +124,19 @@ int chm_msgq_create(const char* name, const chm_msgq_attr_t* attr, int where, ch
  * name; -EBADMSG the queue is corrupt (chm_bp_last_error names the queue
  * and the field); -EDEADLK its lock was held past 5 s by a live peer;
  * -ETIMEDOUT. */
-int chm_msgq_open(const char* name, chm_msgq_t** out);
+CHM_CHECK int chm_msgq_open(const char* name, chm_msgq_t** out);
 
 /* Close this process's handle (the queue lives on until destroyed; a
  * destroyed queue's memory goes with its last open handle anywhere).
  * Errors: -ENOTCONN; -EINVAL not a queue opened by this process;
  * -ETIMEDOUT. */
-int chm_msgq_close(chm_msgq_t* q);
+CHM_CHECK int chm_msgq_close(chm_msgq_t* q);
 
 /* Destroy the queue `name`: the name goes at once; every caller blocked on
  * it is woken and gets -EIDRM, as does every later send or receive through
  * a handle still open. Errors: -ENOTCONN; -EINVAL NULL; -ENOENT no such
  * queue; -ETIMEDOUT; -EDEADLK its lock was held past 5 s by a live peer. */
-int chm_msgq_destroy(const char* name);
+CHM_CHECK int chm_msgq_destroy(const char* name);
 
 /* Timeouts (chimera/kernel.h): `timeout_ns` of the _timed calls is
  * relative; CHM_NO_WAIT does not wait (as the try_ calls), CHM_FOREVER
@@ -162,12 +164,12 @@ int chm_msgq_destroy(const char* name);
  * index read from shared memory (the free list's head, a list's tail) is
  * out of range (the message is not sent); -ENOTCONN.
  * On any error nothing was queued. */
-int chm_msgq_send(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* data, size_t len);
-int chm_msgq_send_timed(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* data, size_t len,
+CHM_CHECK int chm_msgq_send(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* data, size_t len);
+CHM_CHECK int chm_msgq_send_timed(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* data, size_t len,
                         uint64_t timeout_ns);
-int chm_msgq_send_until(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* data, size_t len,
+CHM_CHECK int chm_msgq_send_until(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* data, size_t len,
                         uint64_t deadline_ns);
-int chm_msgq_try_send(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* data, size_t len);
+CHM_CHECK int chm_msgq_try_send(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* data, size_t len);
 
 /* Receive the next message in the queue's order into buf (size bytes);
  * *info (may be NULL) receives its type, priority, length and sender.
@@ -181,17 +183,17 @@ int chm_msgq_try_send(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* d
  * -ENOTRECOVERABLE; -EDEADLK; -EBADMSG a list head or the message's length
  * read from shared memory is out of range; -ENOTCONN. On any error nothing
  * was taken. */
-int chm_msgq_receive(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info);
-int chm_msgq_receive_timed(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info,
+CHM_CHECK int chm_msgq_receive(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info);
+CHM_CHECK int chm_msgq_receive_timed(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info,
                            uint64_t timeout_ns);
-int chm_msgq_receive_until(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info,
+CHM_CHECK int chm_msgq_receive_until(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info,
                            uint64_t deadline_ns);
-int chm_msgq_try_receive(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info);
+CHM_CHECK int chm_msgq_try_receive(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info);
 
 /* A snapshot of the queue (its limits as its open checked them).
  * Errors: -EINVAL bad handle (one this process has not open) or NULL out;
  * -ENOTCONN. */
-int chm_msgq_info(chm_msgq_t* q, chm_msgq_info_t* out);
+CHM_CHECK int chm_msgq_info(chm_msgq_t* q, chm_msgq_info_t* out);
 
 #ifdef __cplusplus
 }

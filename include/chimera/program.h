@@ -20,6 +20,8 @@
 #ifndef CHIMERA_PROGRAM_H
 #define CHIMERA_PROGRAM_H
 
+#include "chimera/status.h"
+
 #include "chimera/task.h"
 
 #ifdef __cplusplus
@@ -53,7 +55,7 @@ extern "C" {
  * given with chm_program_trust_dir, the file must instead lie under one of
  * them (and nothing else loads). A control program runs with the RTPU's
  * privileges, and load requests come over the backplane (chm_rtpu_spawn). */
-int chm_program_load(const char* path, int argc, const char* const* argv,
+CHM_CHECK int chm_program_load(const char* path, int argc, const char* const* argv,
                      const chm_task_attr_t* attr, chm_tid_t* out_main);
 
 /* Let programs load from under `dir` (resolved now, links followed), and
@@ -62,12 +64,12 @@ int chm_program_load(const char* path, int argc, const char* const* argv,
  * again). chimera-rtpu --programs DIR calls it.
  * Errors: -ENOSPC 8 already; -ENOTDIR not a directory; -errno from
  * realpath/stat (-ENOENT no such directory). */
-int chm_program_trust_dir(const char* dir);
+CHM_CHECK int chm_program_trust_dir(const char* dir);
 
 /* The exit status main returned, once it has: 0 with *status set, -EAGAIN
  * while main still runs, -ECHILD main was destroyed before it returned,
  * -EINVAL no such program. */
-int chm_program_status(int program, int* status);
+CHM_CHECK int chm_program_status(int program, int* status);
 
 /* The last loading error's text, "FILE: cause" (for a file the dynamic
  * loader refused, its own words), or "" after a load that succeeded.

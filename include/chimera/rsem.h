@@ -22,6 +22,8 @@
 #ifndef CHIMERA_RSEM_H
 #define CHIMERA_RSEM_H
 
+#include "chimera/status.h"
+
 #include <stdint.h>
 
 #include "chimera/sem.h"
@@ -43,7 +45,7 @@ typedef struct chm_rsem chm_rsem_t; /* a handle: valid in this process */
  * bad kind, binary initial > 1; -EEXIST name taken; -ENOMEM no room;
  * -ENOSPC registry full; -ENAMETOOLONG; -ECHRNG bad `where`; -EBADMSG that
  * memory's block chain is corrupt (chm_bp_last_error names the field). */
-int chm_rsem_create(const char* name, enum chm_sem_kind kind, uint32_t initial, int where,
+CHM_CHECK int chm_rsem_create(const char* name, enum chm_sem_kind kind, uint32_t initial, int where,
                     chm_rsem_t** out);
 
 /* Open the semaphore `name` created by any process.
@@ -51,7 +53,7 @@ int chm_rsem_create(const char* name, enum chm_sem_kind kind, uint32_t initial, 
  * record states and waiting count).
  * Errors: -ENOTCONN; -EINVAL; -ENOENT no such semaphore; -EBADMSG it is
  * corrupt (chm_bp_last_error names the semaphore and the field). */
-int chm_rsem_open(const char* name, chm_rsem_t** out);
+CHM_CHECK int chm_rsem_open(const char* name, chm_rsem_t** out);
 
 /* P: take the semaphore, waiting as long as needed (chm_rsem_p), at most
  * `timeout_ns` (chm_rsem_p_timed), until the absolute time `deadline_ns`
@@ -71,28 +73,28 @@ int chm_rsem_open(const char* name, chm_rsem_t** out);
  * wait; -ENOSPC CHM_RSEM_WAITERS are waiting already; -EINVAL not a
  * semaphore handle; -ENOTRECOVERABLE damaged by a process that died in
  * it; -EDEADLK its lock was held past 5 s by a live process. */
-int chm_rsem_p(chm_rsem_t* sem);
-int chm_rsem_p_timed(chm_rsem_t* sem, uint64_t timeout_ns);
-int chm_rsem_p_until(chm_rsem_t* sem, uint64_t deadline_ns);
-int chm_rsem_try_p(chm_rsem_t* sem);
+CHM_CHECK int chm_rsem_p(chm_rsem_t* sem);
+CHM_CHECK int chm_rsem_p_timed(chm_rsem_t* sem, uint64_t timeout_ns);
+CHM_CHECK int chm_rsem_p_until(chm_rsem_t* sem, uint64_t deadline_ns);
+CHM_CHECK int chm_rsem_try_p(chm_rsem_t* sem);
 
 /* V: wake the most urgent waiter, or count up (a binary semaphore stays
  * at 1). Never blocks. Errors: -EOVERFLOW count at UINT32_MAX; -EINVAL;
  * -ENOTRECOVERABLE; -EDEADLK. */
-int chm_rsem_v(chm_rsem_t* sem);
+CHM_CHECK int chm_rsem_v(chm_rsem_t* sem);
 
 /* The count now (>= 0), or -EINVAL. */
-int chm_rsem_value(chm_rsem_t* sem);
+CHM_CHECK int chm_rsem_value(chm_rsem_t* sem);
 /* Number of tasks and threads waiting now, or -EINVAL. */
-int chm_rsem_waiting(chm_rsem_t* sem);
+CHM_CHECK int chm_rsem_waiting(chm_rsem_t* sem);
 
 /* Forget this process's handle (the semaphore lives on). Errors: -EINVAL
  * not an open remote semaphore; -ENOTCONN not attached; the registry's
  * lock errors, as chm_rsem_open's. */
-int chm_rsem_close(chm_rsem_t* sem);
+CHM_CHECK int chm_rsem_close(chm_rsem_t* sem);
 /* Remove the name; the memory goes when no process has it open.
  * Errors: -ENOTCONN; -EINVAL; -ENOENT. */
-int chm_rsem_destroy(const char* name);
+CHM_CHECK int chm_rsem_destroy(const char* name);
 
 #ifdef __cplusplus
 }

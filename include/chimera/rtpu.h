@@ -32,6 +32,8 @@
 #ifndef CHIMERA_RTPU_H
 #define CHIMERA_RTPU_H
 
+#include "chimera/status.h"
+
 #include <stdint.h>
 
 #include "chimera/kernel.h"
@@ -84,7 +86,7 @@ uint64_t chm_rtpu_timeout(void);
 
 /* Ask RTPU `rtpu` whether it serves, and (info may be NULL) about itself.
  * Returns 0 or an error above. */
-int chm_rtpu_ping(int rtpu, chm_rtpu_info_t* info);
+CHM_CHECK int chm_rtpu_ping(int rtpu, chm_rtpu_info_t* info);
 
 /* Load the control program `path` (a shared object with a main, see
  * chimera/program.h) on RTPU `rtpu` and start its main(argc, argv) as a
@@ -98,22 +100,22 @@ int chm_rtpu_ping(int rtpu, chm_rtpu_info_t* info);
  * requesting slot), -ENOEXEC not a loadable shared object, one linked
  * against libchimera, or one without a main, -ENOSPC too many programs,
  * -ENOMEM, -EAGAIN admission refused. */
-int chm_rtpu_spawn(int rtpu, const char* path, int argc, const char* const* argv, chm_tid_t* tid);
+CHM_CHECK int chm_rtpu_spawn(int rtpu, const char* path, int argc, const char* const* argv, chm_tid_t* tid);
 
 /* Send user signal `signo` (1..CHM_USIG_MAX) to task `task` of RTPU
  * `rtpu` (chimera/usig.h: its handler runs in its own context; a wait it
  * is in returns -EINTR). Errors: -EINVAL bad signo; -ESRCH no such task
  * there. */
-int chm_rtpu_signal(int rtpu, chm_tid_t task, int signo);
+CHM_CHECK int chm_rtpu_signal(int rtpu, chm_tid_t task, int signo);
 
 /* Find the task called `name` on RTPU `rtpu`: *tid receives its id.
  * Errors: -EINVAL NULL or a name longer than CHM_TASK_NAME_MAX; -ESRCH no
  * task of that name. */
-int chm_rtpu_find(int rtpu, const char* name, chm_tid_t* tid);
+CHM_CHECK int chm_rtpu_find(int rtpu, const char* name, chm_tid_t* tid);
 
 /* Destroy task `task` of RTPU `rtpu` (chm_task_destroy there).
  * Errors: -ESRCH no such task; -EPERM it is the RTPU's server task. */
-int chm_rtpu_destroy(int rtpu, chm_tid_t task);
+CHM_CHECK int chm_rtpu_destroy(int rtpu, chm_tid_t task);
 
 /* List the tasks of RTPU `rtpu`: up to `max` go into out[], in task-slot
  * order. Returns how many were filled (>= 0); *total (may be NULL) receives
@@ -123,12 +125,12 @@ int chm_rtpu_destroy(int rtpu, chm_tid_t task);
  * max < 0; -EPROTO the RTPU's entries are of another size than this
  * library's (chimera-rtpu from another Chimera version), or a malformed
  * reply. */
-int chm_rtpu_tasks(int rtpu, chm_rtpu_task_t* out, int max, int* total);
+CHM_CHECK int chm_rtpu_tasks(int rtpu, chm_rtpu_task_t* out, int max, int* total);
 
 /* Stop RTPU `rtpu` gracefully: it replies, then calls
  * chm_kernel_stop(code) (shutdown hooks run); a chimera-rtpu process then
  * leaves the backplane and exits. Returns 0 once the RTPU accepted. */
-int chm_rtpu_stop(int rtpu, int code);
+CHM_CHECK int chm_rtpu_stop(int rtpu, int code);
 
 /* What the last failing chm_rtpu_* call of this thread said, or "".
  * chm_err_last() (err.h) gives the same text per task, whatever the

@@ -21,6 +21,8 @@
 #ifndef CHIMERA_SENSOR_H
 #define CHIMERA_SENSOR_H
 
+#include "chimera/status.h"
+
 #include <stdint.h>
 
 #include "chimera/dev.h"
@@ -97,15 +99,15 @@ typedef struct chm_actuator_stats {
 /* Open `name` as a sensor (read-only). Returns a descriptor.
  * Errors: those of chm_dev_open; CHM_ESIO_NOTSUP not a sensor (the
  * descriptor is closed again). */
-int chm_sensor_open(const char* name);
+CHM_CHECK int chm_sensor_open(const char* name);
 
 /* Describe the sensor's vector. Errors: CHM_EDEV_BADF, CHM_ESIO_NOTSUP,
  * CHM_ESIO_INVAL (NULL). */
-int chm_sensor_info(int sd, chm_sio_info_t* info);
+CHM_CHECK int chm_sensor_info(int sd, chm_sio_info_t* info);
 
 /* Take one reading. Errors: CHM_EDEV_BADF, CHM_ESIO_NOTSUP, CHM_ESIO_INVAL,
  * or the driver's status. */
-int chm_sensor_read(int sd, chm_sensor_sample_t* out);
+CHM_CHECK int chm_sensor_read(int sd, chm_sensor_sample_t* out);
 
 /* Fill `lim` with the device's full range, clamp mode, no rate limit. */
 void chm_actuator_limits_init(chm_actuator_limits_t* lim, const chm_sio_info_t* info);
@@ -116,17 +118,17 @@ void chm_actuator_limits_init(chm_actuator_limits_t* lim, const chm_sio_info_t* 
  * CHM_ESIO_INVAL limits of the wrong length, min > max, outside the
  * device's range, a negative rate or unknown mode. Nothing stays open on
  * error. */
-int chm_actuator_open(const char* name, const chm_actuator_limits_t* lim);
+CHM_CHECK int chm_actuator_open(const char* name, const chm_actuator_limits_t* lim);
 
 /* Describe the actuator's vector (range = the device's hardware range).
  * Errors: CHM_EDEV_BADF not an open descriptor; CHM_ESIO_NOTSUP not an
  * actuator; CHM_ESIO_INVAL NULL info; the driver's error. */
-int chm_actuator_info(int ad, chm_sio_info_t* info);
+CHM_CHECK int chm_actuator_info(int ad, chm_sio_info_t* info);
 
 /* Replace the limits (same checks as at open); the old ones stay on error.
  * Errors: CHM_EDEV_BADF; CHM_ESIO_NOTSUP not opened with
  * chm_actuator_open; CHM_ESIO_INVAL as chm_actuator_open's limits. */
-int chm_actuator_set_limits(int ad, const chm_actuator_limits_t* lim);
+CHM_CHECK int chm_actuator_set_limits(int ad, const chm_actuator_limits_t* lim);
 
 /* Command the actuator with v[0..n-1] (n must be the device's length).
  * Returns 0 applied as given; CHM_ACT_CLAMPED applied after clamping
@@ -134,20 +136,20 @@ int chm_actuator_set_limits(int ad, const chm_actuator_limits_t* lim);
  * beyond min/max or the rate); CHM_EACT_STOPPED safe stop latched;
  * CHM_EDEV_BADF; CHM_ESIO_NOTSUP (not opened with chm_actuator_open);
  * CHM_ESIO_INVAL (NULL, wrong n, a NaN: never applied, in either mode). */
-int chm_actuator_write(int ad, const double* v, uint32_t n);
+CHM_CHECK int chm_actuator_write(int ad, const double* v, uint32_t n);
 
 /* Safe stop now, and latch it: commands are refused with CHM_EACT_STOPPED
  * until chm_actuator_resume. Errors: CHM_EDEV_BADF, CHM_ESIO_NOTSUP. */
-int chm_actuator_stop(int ad);
+CHM_CHECK int chm_actuator_stop(int ad);
 
 /* Leave a safe stop; the output is 0 until the next command. Errors:
  * CHM_EDEV_BADF; CHM_ESIO_NOTSUP not opened with chm_actuator_open; the
  * driver's error (the stop stays latched). */
-int chm_actuator_resume(int ad);
+CHM_CHECK int chm_actuator_resume(int ad);
 
 /* Counters and the last applied vector. Errors: CHM_EDEV_BADF,
  * CHM_ESIO_NOTSUP, CHM_ESIO_INVAL. */
-int chm_actuator_stats(int ad, chm_actuator_stats_t* out);
+CHM_CHECK int chm_actuator_stats(int ad, chm_actuator_stats_t* out);
 
 #ifdef __cplusplus
 }

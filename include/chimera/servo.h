@@ -21,6 +21,8 @@
 #ifndef CHIMERA_SERVO_H
 #define CHIMERA_SERVO_H
 
+#include "chimera/status.h"
+
 #include <stddef.h>
 #include <stdint.h>
 
@@ -91,13 +93,13 @@ typedef struct {
  * -EINVAL empty mask; -EBUSY held (the message names the RTPU and the
  * holder's slot); -EHOSTDOWN an RTPU is not running; express-mail errors
  * (chimera/rtpu.h). Nothing is taken on error. */
-int chm_servo_take(uint32_t rtpus);
+CHM_CHECK int chm_servo_take(uint32_t rtpus);
 
 /* Give control of those RTPUs back (their modules run on). Every RTPU in
  * the mask is asked, even after one fails. Errors: the first RTPU's
  * failure: -EPERM the caller did not hold it; -EHOSTDOWN not running;
  * express-mail errors (chimera/rtpu.h). */
-int chm_servo_release(uint32_t rtpus);
+CHM_CHECK int chm_servo_release(uint32_t rtpus);
 
 /* Load the module `s->path` on RTPU `s->rtpu` as instance `s->name`, check
  * its descriptor, set its parameters, open its state variables and run its
@@ -112,11 +114,11 @@ int chm_servo_release(uint32_t rtpus);
  * -ENOSPC CHM_SERVO_MODULES_MAX modules there; -ECANCELED init failed or
  * faulted (the module is not created; the message says why); express-mail
  * errors. */
-int chm_servo_spawn(const chm_servo_spawn_t* s, chm_servo_module_t* out);
+CHM_CHECK int chm_servo_spawn(const chm_servo_spawn_t* s, chm_servo_module_t* out);
 
 /* Find the instance `name` on RTPU `rtpu` (-1: every controlled RTPU, and
  * others' too). Errors: -ENOENT; -EINVAL NULL. */
-int chm_servo_find(int rtpu, const char* name, chm_servo_module_t* out);
+CHM_CHECK int chm_servo_find(int rtpu, const char* name, chm_servo_module_t* out);
 
 /* Switch modules: every module of `off` (n_off) goes OFF and every module
  * of `on` (n_on) goes ON at one instant T (see above); *at_ns (may be
@@ -129,34 +131,34 @@ int chm_servo_find(int rtpu, const char* name, chm_servo_module_t* out);
  * modules); -ETIME T passed before an RTPU got the commit (nothing
  * switched); -EHOSTDOWN an RTPU is gone. */
 #define CHM_SERVO_BEST_EFFORT 0x1u
-int chm_servo_switch(const chm_servo_module_t* off, size_t n_off, const chm_servo_module_t* on, size_t n_on,
+CHM_CHECK int chm_servo_switch(const chm_servo_module_t* off, size_t n_off, const chm_servo_module_t* on, size_t n_on,
                      unsigned flags, uint64_t* at_ns);
 
 /* One module on, or off: chm_servo_switch of one. Errors: as
  * chm_servo_switch. */
-int chm_servo_on(chm_servo_module_t m);
-int chm_servo_off(chm_servo_module_t m);
+CHM_CHECK int chm_servo_on(chm_servo_module_t m);
+CHM_CHECK int chm_servo_off(chm_servo_module_t m);
 
 /* Set parameter `param` of module m to `value`, effective before its next
  * cycle. Errors: -ESRCH no such parameter; -ERANGE outside its range;
  * -ESTALE; -EPERM; express-mail errors. */
-int chm_servo_control(chm_servo_module_t m, const char* param, double value);
+CHM_CHECK int chm_servo_control(chm_servo_module_t m, const char* param, double value);
 
 /* ERROR -> OFF through the module's clear (if it has one). Errors:
  * -EALREADY not in ERROR; -ECANCELED clear failed (still ERROR); -ESTALE;
  * -EPERM. */
-int chm_servo_clear(chm_servo_module_t m);
+CHM_CHECK int chm_servo_clear(chm_servo_module_t m);
 
 /* Remove the module from any state: off (when ON) and kill run, its
  * claims end, its code is unloaded. Errors: -ESTALE; -EPERM;
  * express-mail errors. The module is gone even when kill fails (the
  * message says so). */
-int chm_servo_kill(chm_servo_module_t m);
+CHM_CHECK int chm_servo_kill(chm_servo_module_t m);
 
 /* Status of module m; a module of an RTPU that died or left is DEAD.
  * Errors: -ESTALE no such module (killed, or the index reused); -EINVAL
  * NULL out; express-mail errors but -EHOSTDOWN (reported as DEAD). */
-int chm_servo_status(chm_servo_module_t m, chm_servo_status_t* out);
+CHM_CHECK int chm_servo_status(chm_servo_module_t m, chm_servo_status_t* out);
 
 /* Why the calling thread's last servo call failed.
  * chm_err_last() (err.h) gives the same text per task, whatever the
@@ -196,21 +198,21 @@ typedef struct chm_servo_system chm_servo_system_t;
  * a syntax error, an unknown key, a value of the wrong type or out of
  * range, a variable declared twice, a module named twice on one RTPU);
  * -ENOMEM. chm_err_last() says what failed. */
-int chm_servo_system_open(const char* path, chm_servo_system_t** out);
+CHM_CHECK int chm_servo_system_open(const char* path, chm_servo_system_t** out);
 
 /* Declare every state variable of the file (chm_svar_declare). Errors:
  * those of chm_svar_declare (the message names the file and variable). */
-int chm_servo_system_declare(chm_servo_system_t* sys);
+CHM_CHECK int chm_servo_system_declare(chm_servo_system_t* sys);
 
 /* Take control of every RTPU the file names and spawn every module there,
  * OFF. On error the modules spawned so far are killed. Errors: those of
  * chm_servo_take and chm_servo_spawn, the message naming the module. */
-int chm_servo_system_spawn(chm_servo_system_t* sys);
+CHM_CHECK int chm_servo_system_spawn(chm_servo_system_t* sys);
 
 /* Switch on, in one switch (chm_servo_switch), every module whose `on` is
  * true; *at_ns (may be NULL) receives the instant. Errors: -ESRCH a module
  * is not spawned; those of chm_servo_switch. */
-int chm_servo_system_start(chm_servo_system_t* sys, uint64_t* at_ns);
+CHM_CHECK int chm_servo_system_start(chm_servo_system_t* sys, uint64_t* at_ns);
 
 /* One module of the file, in file order. */
 typedef struct {
@@ -224,14 +226,14 @@ typedef struct {
 } chm_servo_system_entry_t;
 size_t chm_servo_system_modules(const chm_servo_system_t* sys);
 /* Errors: -EINVAL NULL or no such index. */
-int chm_servo_system_module_at(const chm_servo_system_t* sys, size_t i, chm_servo_system_entry_t* out);
+CHM_CHECK int chm_servo_system_module_at(const chm_servo_system_t* sys, size_t i, chm_servo_system_entry_t* out);
 /* The module called `name` (spawned). Errors: -EINVAL NULL; -ENOENT no
  * such module in the file; -ESRCH not spawned. */
-int chm_servo_system_find(const chm_servo_system_t* sys, const char* name, chm_servo_module_t* out);
+CHM_CHECK int chm_servo_system_find(const chm_servo_system_t* sys, const char* name, chm_servo_module_t* out);
 /* The file's state variables, in file order (the strings live as long as
  * the system). Errors: -EINVAL NULL or no such index. */
 size_t chm_servo_system_svars(const chm_servo_system_t* sys);
-int chm_servo_system_svar(const chm_servo_system_t* sys, size_t i, chm_svar_decl_t* out);
+CHM_CHECK int chm_servo_system_svar(const chm_servo_system_t* sys, size_t i, chm_svar_decl_t* out);
 
 /* Free the description (modules run on; kill them with chm_servo_kill). */
 void chm_servo_system_close(chm_servo_system_t* sys);

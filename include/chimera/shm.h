@@ -17,6 +17,8 @@
 #ifndef CHIMERA_SHM_H
 #define CHIMERA_SHM_H
 
+#include "chimera/status.h"
+
 #include <stddef.h>
 
 #ifdef __cplusplus
@@ -37,7 +39,7 @@ extern "C" {
  * by a process that died in it; -EBADMSG that window's block chain is
  * corrupt (chm_err_last names the block and field); -ETIMEDOUT a live
  * peer held the registry for more than 5 s; -ENOTCONN not attached. */
-int chm_shm_create(const char* name, size_t size, int where, void** out);
+CHM_CHECK int chm_shm_create(const char* name, size_t size, int where, void** out);
 
 /* Attach the segment `name`: *out its address here, *size (may be NULL)
  * its size. Attaching twice gives the same address and needs two detaches.
@@ -45,19 +47,19 @@ int chm_shm_create(const char* name, size_t size, int where, void** out);
  * -EBADMSG its registry entry is corrupt: offset and size do not describe
  * an allocated block of its memory (chm_err_last names the field);
  * -ETIMEDOUT; -ENOTCONN. */
-int chm_shm_attach(const char* name, void** out, size_t* size);
+CHM_CHECK int chm_shm_attach(const char* name, void** out, size_t* size);
 
 /* Detach a segment attached (or created) by this process, given the
  * address attach returned. A destroyed segment's memory is freed when its
  * last attachment anywhere goes. Errors: -EINVAL not a segment attached
  * here; -ETIMEDOUT; -ENOTCONN. */
-int chm_shm_detach(void* addr);
+CHM_CHECK int chm_shm_detach(void* addr);
 
 /* Destroy the segment `name`: the name goes at once (a new segment may
  * take it); the memory stays valid for every process that has it attached
  * until each detaches (or leaves, or dies). Errors: -EINVAL NULL;
  * -ENOENT no such segment; -ETIMEDOUT; -ENOTCONN. */
-int chm_shm_destroy(const char* name);
+CHM_CHECK int chm_shm_destroy(const char* name);
 
 #ifdef __cplusplus
 }

@@ -20,6 +20,8 @@
 #ifndef CHIMERA_SPIN_H
 #define CHIMERA_SPIN_H
 
+#include "chimera/status.h"
+
 #include <stdint.h>
 
 #include "chimera/kernel.h" /* CHM_FOREVER, CHM_NO_WAIT */
@@ -41,7 +43,7 @@ typedef struct chm_spin {
 #define CHM_SPIN_FOREVER CHM_FOREVER
 
 /* Make `lock` free. Errors: -EINVAL NULL or misaligned. */
-int chm_spin_init(chm_spin_t* lock);
+CHM_CHECK int chm_spin_init(chm_spin_t* lock);
 
 /* Acquire `lock`. For the first poll_interval_ns the waiter tests the lock
  * continuously; after that it tests once every poll_interval_ns and gives
@@ -55,20 +57,20 @@ int chm_spin_init(chm_spin_t* lock);
  * convention); -ETIMEDOUT: not acquired within a positive timeout_ns;
  * -EINVAL NULL or misaligned; -ENOTCONN not attached.
  * Not recursive: a second lock by the same RTPU waits like anyone else. */
-int chm_spin_lock(chm_spin_t* lock, uint64_t poll_interval_ns, uint64_t timeout_ns);
+CHM_CHECK int chm_spin_lock(chm_spin_t* lock, uint64_t poll_interval_ns, uint64_t timeout_ns);
 
 /* One attempt, never waiting: 0 acquired; -EOWNERDEAD acquired from a dead
  * holder; -EAGAIN held by another. Errors: -EINVAL NULL or misaligned;
  * -ENOTCONN not attached. */
-int chm_spin_try_lock(chm_spin_t* lock);
+CHM_CHECK int chm_spin_try_lock(chm_spin_t* lock);
 
 /* The name before API 1.0, kept for one release (CHANGELOG.md): as
  * chm_spin_try_lock, but a held lock gives -EBUSY. */
-int chm_spin_trylock(chm_spin_t* lock);
+CHM_CHECK int chm_spin_trylock(chm_spin_t* lock);
 
 /* Release. Errors: -EPERM not held by this RTPU (or host process);
  * -EINVAL NULL; -ENOTCONN. */
-int chm_spin_unlock(chm_spin_t* lock);
+CHM_CHECK int chm_spin_unlock(chm_spin_t* lock);
 
 #ifdef __cplusplus
 }

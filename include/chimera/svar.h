@@ -39,6 +39,8 @@
 #ifndef CHIMERA_SVAR_H
 #define CHIMERA_SVAR_H
 
+#include "chimera/status.h"
+
 #include <stddef.h>
 #include <stdint.h>
 
@@ -93,7 +95,7 @@ typedef struct {
  * the table; -EBADMSG the table in the file is corrupt (the message names
  * the entry and field); -ETIMEDOUT a live peer held the table past 5 s;
  * -ENOTCONN not attached. */
-int chm_svar_declare(const chm_svar_decl_t* decl);
+CHM_CHECK int chm_svar_declare(const chm_svar_decl_t* decl);
 
 #define CHM_SVAR_CAPACITY 256
 #define CHM_SVAR_DATA_BYTES (512u * 1024u)
@@ -101,15 +103,15 @@ int chm_svar_declare(const chm_svar_decl_t* decl);
 /* Fill *out for the variable `name`. Errors: -EINVAL NULL argument;
  * -ENOENT no such variable (or no table yet); -EBADMSG corrupt entry;
  * -ENOTCONN. */
-int chm_svar_info(const char* name, chm_svar_info_t* out);
+CHM_CHECK int chm_svar_info(const char* name, chm_svar_info_t* out);
 
 /* The number of declared variables (>= 0), or -EBADMSG / -ENOTCONN.
  * Variables are numbered 0..count-1 in declaration order, for listing. */
-int chm_svar_count(void);
+CHM_CHECK int chm_svar_count(void);
 
 /* Fill *out for variable number `index` (0..chm_svar_count()-1).
  * Errors: -EINVAL NULL out; -ENOENT no such index; -EBADMSG; -ENOTCONN. */
-int chm_svar_info_at(int index, chm_svar_info_t* out);
+CHM_CHECK int chm_svar_info_at(int index, chm_svar_info_t* out);
 
 /* Copy the current value of `name` into buf (`size` >= its bytes): one
  * consistent value, as chm_svar_set_read gives. For monitoring and
@@ -117,7 +119,7 @@ int chm_svar_info_at(int index, chm_svar_info_t* out);
  * argument; -EMSGSIZE size smaller than the value; -ENOENT; -EAGAIN the
  * value changed under 64 attempts in a row (a corrupt sequence word, or a
  * writer far faster than this reader); -EBADMSG; -ENOTCONN. */
-int chm_svar_get(const char* name, void* buf, size_t size);
+CHM_CHECK int chm_svar_get(const char* name, void* buf, size_t size);
 
 /* ------------------------------------------------------------------ sets */
 
@@ -137,14 +139,14 @@ typedef struct chm_svar_set chm_svar_set_t;
  * (chm_err_last names the variable, that writer and this owner);
  * -ENOMEM no memory for the local copies; -EBADMSG a corrupt entry;
  * -ETIMEDOUT; -ENOTCONN. */
-int chm_svar_set_create(const char* owner, const char* const* inputs, size_t n_in,
+CHM_CHECK int chm_svar_set_create(const char* owner, const char* const* inputs, size_t n_in,
                         const char* const* outputs, size_t n_out, chm_svar_set_t** out);
 
 /* As chm_svar_set_create, but the set claims nothing yet: it can read,
  * and writes only after chm_svar_set_claim. A module's set is opened when
  * it is spawned and claims its outputs when it is switched on.
  * Errors: those of chm_svar_set_create but -EBUSY. */
-int chm_svar_set_open(const char* owner, const char* const* inputs, size_t n_in,
+CHM_CHECK int chm_svar_set_open(const char* owner, const char* const* inputs, size_t n_in,
                       const char* const* outputs, size_t n_out, chm_svar_set_t** out);
 
 /* Claim every output of the set, all or none. A live writer whose owner
@@ -156,17 +158,17 @@ int chm_svar_set_open(const char* owner, const char* const* inputs, size_t n_in,
  * names; -EBUSY an output has another live writer (chm_err_last
  * names the variable, that writer and this owner); -ETIMEDOUT; -ENOTCONN
  * the set's attachment is gone. */
-int chm_svar_set_claim(chm_svar_set_t* set, const char* const* displace, size_t n_displace);
+CHM_CHECK int chm_svar_set_claim(chm_svar_set_t* set, const char* const* displace, size_t n_displace);
 
 /* Would chm_svar_set_claim(set, displace, n_displace) succeed now? Changes
  * nothing. 0, or the errors of chm_svar_set_claim (-EBUSY naming the
  * variable and its writer). */
-int chm_svar_set_check_claim(chm_svar_set_t* set, const char* const* displace, size_t n_displace);
+CHM_CHECK int chm_svar_set_check_claim(chm_svar_set_t* set, const char* const* displace, size_t n_displace);
 
 /* chm_svar_set_claim for a switch at instant `at_ns` (monotonic ns): the
  * claim is recorded as holding from then on, and a displaced set learns it
  * through chm_svar_set_displaced. Errors: those of chm_svar_set_claim. */
-int chm_svar_set_claim_at(chm_svar_set_t* set, const char* const* displace, size_t n_displace, uint64_t at_ns);
+CHM_CHECK int chm_svar_set_claim_at(chm_svar_set_t* set, const char* const* displace, size_t n_displace, uint64_t at_ns);
 
 /* 1 when another set has taken one of this set's outputs with a hand-over
  * instant at or before `release_ns` (the writer must stop writing from the
@@ -177,7 +179,7 @@ int chm_svar_set_displaced(const chm_svar_set_t* set, uint64_t release_ns);
 
 /* Give up the set's claims (those still naming it); the set stays open
  * for reading. Errors: -EINVAL NULL; -ETIMEDOUT. */
-int chm_svar_set_release(chm_svar_set_t* set);
+CHM_CHECK int chm_svar_set_release(chm_svar_set_t* set);
 
 /* The local copy of `name` in the set (an input or an output), 16-byte
  * aligned, `bytes` long: read and write it directly. NULL when `name` is
@@ -188,24 +190,24 @@ void* chm_svar_set_local(const chm_svar_set_t* set, const char* name);
  * variable whole. Never blocks. Returns 0; -EAGAIN an input changed under
  * 64 attempts in a row (its local copy keeps the previous value, the
  * other inputs are copied; chm_err_last names it); -EINVAL NULL. */
-int chm_svar_set_read(chm_svar_set_t* set);
+CHM_CHECK int chm_svar_set_read(chm_svar_set_t* set);
 
 /* Copy-out: every output's local copy into the global table, each
  * variable whole. Never blocks, never waits for readers. Returns 0;
  * -EINVAL NULL; -EPERM the set holds no claim (opened and never claimed,
  * or released; a set displaced by a switch still writes until released);
  * -ENOTCONN its attachment is gone. */
-int chm_svar_set_write(chm_svar_set_t* set);
+CHM_CHECK int chm_svar_set_write(chm_svar_set_t* set);
 
 /* Bytes the set copies per cycle: *in_bytes by chm_svar_set_read,
  * *out_bytes by chm_svar_set_write (either may be NULL). Errors: -EINVAL
  * NULL set. */
-int chm_svar_set_bytes(const chm_svar_set_t* set, size_t* in_bytes, size_t* out_bytes);
+CHM_CHECK int chm_svar_set_bytes(const chm_svar_set_t* set, size_t* in_bytes, size_t* out_bytes);
 
 /* Give up the set's writer claims and free it. Errors: -EINVAL NULL;
  * -ETIMEDOUT the table was held past 5 s (the set is freed anyway; its
  * claims end with its process). */
-int chm_svar_set_destroy(chm_svar_set_t* set);
+CHM_CHECK int chm_svar_set_destroy(chm_svar_set_t* set);
 
 #ifdef __cplusplus
 }

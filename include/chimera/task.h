@@ -3,6 +3,8 @@
 #ifndef CHIMERA_TASK_H
 #define CHIMERA_TASK_H
 
+#include "chimera/status.h"
+
 #include <stddef.h>
 #include <stdint.h>
 
@@ -66,7 +68,7 @@ void chm_task_attr_init(chm_task_attr_t* attr);
  * the period, wcet longer than the deadline, period without a positive
  * deadline; -ENAMETOOLONG; -EAGAIN the scheduler refused admission;
  * -ENOMEM; -EPERM kernel not initialised. Nothing is left behind on error. */
-int chm_task_spawn(chm_tid_t* out, void (*entry)(void* arg), void* arg, const chm_task_attr_t* attr);
+CHM_CHECK int chm_task_spawn(chm_tid_t* out, void (*entry)(void* arg), void* arg, const chm_task_attr_t* attr);
 
 /* End the calling task (exit status 0). Task context. Does not return.
  * Its end hooks run first (chm_task_on_end). */
@@ -80,7 +82,7 @@ void chm_task_end(int status);
  * off the CPU first, then its end hooks run in the caller's context, then
  * its stack is freed; semaphores it holds are NOT released (see chm_sem
  * docs). Errors: -ESRCH unknown task. */
-int chm_task_destroy(chm_tid_t task);
+CHM_CHECK int chm_task_destroy(chm_tid_t task);
 
 /* How a task ended (chm_task_status_t.end_reason). */
 enum chm_task_end_reason {
@@ -100,7 +102,7 @@ enum chm_task_end_reason {
  * an error does not stop the others. Up to 8 per task. Task context.
  * Errors: -EINVAL NULL hook; -ENOSPC 8 already; -EPERM not in a task;
  * -ENOMEM. */
-int chm_task_on_end(void (*hook)(void* arg), void* arg);
+CHM_CHECK int chm_task_on_end(void (*hook)(void* arg), void* arg);
 
 /* Task-local storage: a key names one slot in every task; a task's value
  * for it starts NULL. Up to 32 keys per RTPU; keys are never deleted.
@@ -108,11 +110,11 @@ int chm_task_on_end(void (*hook)(void* arg), void* arg);
  * that task ends, after its end hooks. Errors: -EINVAL NULL key; -EAGAIN
  * 32 keys exist. */
 typedef uint32_t chm_task_key_t;
-int chm_task_key_create(chm_task_key_t* key, void (*destructor)(void* value));
+CHM_CHECK int chm_task_key_create(chm_task_key_t* key, void (*destructor)(void* value));
 /* The calling task's value for `key` (NULL if none, or outside a task). */
 void* chm_task_get_local(chm_task_key_t key);
 /* Set it. Errors: -EINVAL unknown key; -EPERM not in a task; -ENOMEM. */
-int chm_task_set_local(chm_task_key_t key, void* value);
+CHM_CHECK int chm_task_set_local(chm_task_key_t key, void* value);
 
 /* Timing of a periodic task, as chm_task_set_timing takes it. */
 typedef struct chm_task_timing {
@@ -136,22 +138,22 @@ typedef struct chm_task_timing {
  * Errors: -ESRCH unknown task; -EINVAL NULL, an aperiodic task (period 0),
  * a period of 0, a deadline beyond the period, an estimate beyond the
  * deadline. */
-int chm_task_set_timing(chm_tid_t task, const chm_task_timing_t* timing);
+CHM_CHECK int chm_task_set_timing(chm_tid_t task, const chm_task_timing_t* timing);
 
 /* Suspend until chm_task_resume (counted). Errors: -ESRCH. */
-int chm_task_suspend(chm_tid_t task);
+CHM_CHECK int chm_task_suspend(chm_tid_t task);
 /* Errors: -ESRCH; -EINVAL not suspended. */
-int chm_task_resume(chm_tid_t task);
+CHM_CHECK int chm_task_resume(chm_tid_t task);
 
 /* Change the static user priority (re-sorts it wherever it waits).
  * Errors: -ESRCH. */
-int chm_task_set_priority(chm_tid_t task, int priority);
+CHM_CHECK int chm_task_set_priority(chm_tid_t task, int priority);
 
 /* The calling task, or CHM_TID_NONE outside a task. Any context. */
 chm_tid_t chm_task_self(void);
 
 /* Find a task by name. Errors: -ESRCH none; -EINVAL NULL. */
-int chm_task_find(const char* name, chm_tid_t* out);
+CHM_CHECK int chm_task_find(const char* name, chm_tid_t* out);
 
 /* Give the CPU to the next ready task of equal urgency, if any. Task context. */
 void chm_task_yield(void);
@@ -205,7 +207,7 @@ typedef struct chm_task_status {
  * reused oldest-freed first, so at least until as many tasks have been
  * spawned as there were free slots when it ended.
  * Errors: -ESRCH unknown task (or ended and its slot reused), -EINVAL NULL. */
-int chm_task_status(chm_tid_t task, chm_task_status_t* out);
+CHM_CHECK int chm_task_status(chm_tid_t task, chm_task_status_t* out);
 
 /* Wait until `task` ends (at most timeout_ns, relative, chimera/kernel.h
  * "Timeouts": CHM_NO_WAIT only looks, CHM_FOREVER waits as long as it
@@ -218,7 +220,7 @@ int chm_task_status(chm_tid_t task, chm_task_status_t* out);
  * timeout_ns is CHM_NO_WAIT; -ETIMEDOUT it did not end within timeout_ns
  * (either way it stays joinable); -EINTR a user signal interrupted the
  * wait; -EPERM not in a task. */
-int chm_task_join(chm_tid_t task, uint64_t timeout_ns, chm_task_status_t* out);
+CHM_CHECK int chm_task_join(chm_tid_t task, uint64_t timeout_ns, chm_task_status_t* out);
 
 /* Returns the number of tasks alive. Never fails. Any context. */
 int chm_task_count(void);

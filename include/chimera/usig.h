@@ -5,6 +5,8 @@
 #ifndef CHIMERA_USIG_H
 #define CHIMERA_USIG_H
 
+#include "chimera/status.h"
+
 #include "chimera/task.h"
 
 #ifdef __cplusplus
@@ -17,10 +19,10 @@ typedef void (*chm_usig_handler_t)(int signo, void* arg);
 
 /* Install the calling task's handler for `signo` (NULL ignores it).
  * Errors: -EINVAL signo outside 1..31; -EPERM outside a task. */
-int chm_usig_handle(int signo, chm_usig_handler_t handler, void* arg);
+CHM_CHECK int chm_usig_handle(int signo, chm_usig_handler_t handler, void* arg);
 
 /* Send `signo` to a task. Errors: -ESRCH, -EINVAL. Task or interrupt context. */
-int chm_usig_send(chm_tid_t task, int signo);
+CHM_CHECK int chm_usig_send(chm_tid_t task, int signo);
 
 /* Block (1) or unblock (0) delivery of signals in the mask (bit n = signo n)
  * for the calling task; returns the previous mask. */

@@ -35,6 +35,8 @@
 #ifndef CHIMERA_XFS_H
 #define CHIMERA_XFS_H
 
+#include "chimera/status.h"
+
 #include <stddef.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -69,10 +71,10 @@ typedef struct chm_xfs_stat {
  * leads out of the host server's root (absolute, "..", a symbolic link);
  * -EMFILE CHM_XFS_OPEN_MAX handles open; -ENAMETOOLONG the path does not
  * fit one request; the host's open(2) errors. */
-int chm_xfs_open(const char* path, int flags, unsigned mode);
+CHM_CHECK int chm_xfs_open(const char* path, int flags, unsigned mode);
 
 /* Close a handle. Errors: -EBADF not a handle of this process. */
-int chm_xfs_close(int fd);
+CHM_CHECK int chm_xfs_close(int fd);
 
 /* Read up to `n` bytes at the handle's position (which moves on), or at
  * `offset` with chm_xfs_pread (the position stays). Returns the bytes read,
@@ -80,29 +82,29 @@ int chm_xfs_close(int fd);
  * one part ends the call.
  * Errors: -EBADF; -EFAULT buf NULL with n > 0; -EINVAL n > INT32_MAX or
  * offset < 0; the host's read(2) errors. */
-int64_t chm_xfs_read(int fd, void* buf, size_t n);
-int64_t chm_xfs_pread(int fd, void* buf, size_t n, int64_t offset);
+CHM_CHECK int64_t chm_xfs_read(int fd, void* buf, size_t n);
+CHM_CHECK int64_t chm_xfs_pread(int fd, void* buf, size_t n, int64_t offset);
 
 /* Write `n` bytes at the position (or at `offset`). Returns the bytes
  * written. Errors as chm_xfs_read, and the host's write(2) errors. */
-int64_t chm_xfs_write(int fd, const void* buf, size_t n);
-int64_t chm_xfs_pwrite(int fd, const void* buf, size_t n, int64_t offset);
+CHM_CHECK int64_t chm_xfs_write(int fd, const void* buf, size_t n);
+CHM_CHECK int64_t chm_xfs_pwrite(int fd, const void* buf, size_t n, int64_t offset);
 
 /* Move the position as lseek(2) (whence SEEK_SET, SEEK_CUR, SEEK_END);
  * returns the new position. Errors: -EBADF; -EINVAL bad whence or a
  * negative result. */
-int64_t chm_xfs_lseek(int fd, int64_t offset, int whence);
+CHM_CHECK int64_t chm_xfs_lseek(int fd, int64_t offset, int whence);
 
 /* What the host says about `path` (links followed, beneath the root) or
  * an open handle. Errors: -EFAULT out NULL; as chm_xfs_open; -EBADF. */
-int chm_xfs_stat(const char* path, chm_xfs_stat_t* out);
-int chm_xfs_fstat(int fd, chm_xfs_stat_t* out);
+CHM_CHECK int chm_xfs_stat(const char* path, chm_xfs_stat_t* out);
+CHM_CHECK int chm_xfs_fstat(int fd, chm_xfs_stat_t* out);
 
 /* ioctl(2) on the host's descriptor: `arg` (arg_size bytes, at most 256)
  * is passed in and copied back. Returns ioctl's non-negative result.
  * Errors: -EBADF; -EINVAL arg_size > 256 or arg NULL with arg_size > 0;
  * the host's ioctl errors (-ENOTTY: not for this file). */
-int chm_xfs_ioctl(int fd, unsigned long request, void* arg, size_t arg_size);
+CHM_CHECK int chm_xfs_ioctl(int fd, unsigned long request, void* arg, size_t arg_size);
 
 /* Buffered stdio over the extended file system: a FILE* (fopencookie) for
  * fprintf, fgets, fread, fseek... Mode as fopen(3) ("r", "w", "a", "r+",

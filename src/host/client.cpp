@@ -48,7 +48,7 @@ bool bulk_ready() {
     // A task with global error handling would take -EEXIST or -ENOMEM as
     // an error signal; here they are outcomes.
     const int global = chm_err_global_get();
-    if (global) chm_err_global(0);
+    if (global) (void)chm_err_global(0);
     char name[CHM_BP_NAME_MAX + 1];
     bulk_name(name, sizeof name, a->slot);
     void* addr = nullptr;
@@ -58,11 +58,11 @@ bool bulk_ready() {
         std::size_t size = 0;
         r = chm_shm_attach(name, &addr, &size);
         if (r == 0 && size < want) {
-            chm_shm_detach(addr);
+            (void)chm_shm_detach(addr);
             r = -EMSGSIZE;
         }
     }
-    if (global) chm_err_global(1);
+    if (global) (void)chm_err_global(1);
     g_bulk_attach = bp::attach_count();
     if (r != 0) {
         g_bulk_state.store(kUnavailable, std::memory_order_release);

@@ -95,7 +95,7 @@ void enqueue(std::uint8_t stream, chm_tid_t tid, const char* text, std::uint16_t
         }
         chm_task_pause_until(chm_time_now() + 1'000'000);  // the drainer makes room
     }
-    chm_sem_v(&g.ready);
+    (void)chm_sem_v(&g.ready);
 }
 
 // Append text of the running task to its half line; queue what completes.
@@ -177,7 +177,7 @@ ssize_t cookie_read(void*, char* buf, size_t n) {
 void drain(void*) {
     char batch[2048];
     for (;;) {
-        chm_sem_p(&g.ready);
+        (void)chm_sem_p(&g.ready);
         while (chm_sem_try_p(&g.ready) == 0) {
         }
         for (;;) {
@@ -227,7 +227,7 @@ int start(int priority) {
     a.name = "stdio";
     a.priority = priority;
     if (int e = chm_task_spawn(&g.drainer, drain, nullptr, &a)) {
-        chm_sem_destroy(&g.ready);
+        (void)chm_sem_destroy(&g.ready);
         return e;
     }
     std::fflush(nullptr);

@@ -78,7 +78,7 @@ extern "C" FILE* chm_xfs_fopen(const char* path, const char* mode) {
     if (!f) {
         const int e = errno;
         chm::host::set_error("fopen %s: %s", path, std::strerror(e));
-        chm_xfs_close(fd);
+        (void)chm_xfs_close(fd);
         errno = e;
     }
     return f;

@@ -42,7 +42,7 @@ struct Cmdi {
         while ((n = std::fread(buf, 1, sizeof buf, f)) > 0) s.append(buf, n);
         std::fclose(f);
         f = std::tmpfile();
-        chm_cmdi_set_output(c, f);
+        (void)chm_cmdi_set_output(c, f);
         return s;
     }
     std::string err() const { return chm_cmdi_last_error(c); }

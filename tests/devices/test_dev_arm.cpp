@@ -316,17 +316,17 @@ TEST_F(Arm, AbortingTheOwningTaskStopsItsActuator) {
         auto* c = static_cast<AbortCtx*>(p);
         c->ad = chm_actuator_open("arm2", nullptr);
         const double tau[2] = {3.0, -3.0};
-        chm_actuator_write(c->ad, tau, 2);
-        chm_task_suspend(chm_task_self());
+        (void)chm_actuator_write(c->ad, tau, 2);
+        (void)chm_task_suspend(chm_task_self());
     }, &ctx, &at), 0);
     at.priority = 1;
     chm_tid_t b;
     ASSERT_EQ(chm_task_spawn(&b, [](void* p) {
         auto* c = static_cast<AbortCtx*>(p);
         c->closed = chm_dev_task_abort(c->owner);
-        chm_task_destroy(c->owner);
+        (void)chm_task_destroy(c->owner);
     }, &ctx, &at), 0);
-    chm_kernel_run();
+    (void)chm_kernel_run();
     chm_kernel_fini();
     ASSERT_GE(ctx.ad, 0);
     EXPECT_EQ(ctx.closed, 1);
@@ -352,11 +352,11 @@ TEST_F(Arm, ATaskAbortedByAnErrorLeavesItsActuatorStopped) {
     ASSERT_EQ(chm_task_spawn(&t, [](void*) {
         ad = chm_actuator_open("arm3", nullptr);
         const double tau[2] = {2.0, -2.0};
-        chm_actuator_write(ad, tau, 2);
+        (void)chm_actuator_write(ad, tau, 2);
         chm_err_invoke(CHM_ERR_KERNEL, CHM_EK_HEAP);  // no handler: aborts this task
         ran_on = true;
     }, nullptr, nullptr), 0);
-    chm_kernel_run();
+    (void)chm_kernel_run();
     chm_kernel_fini();
     ASSERT_GE(ad, 0);
     EXPECT_FALSE(ran_on) << "the default handler did not abort the task";
@@ -408,13 +408,13 @@ TEST_F(Arm, JointPositionLoopConverges) {
             }
             L->err = std::max(std::fabs(L->target[0] - s.v[0]), std::fabs(L->target[1] - s.v[1]));
             L->speed = std::max(std::fabs(s.v[2]), std::fabs(s.v[3]));
-            chm_actuator_write(L->ad, tau, 2);
+            (void)chm_actuator_write(L->ad, tau, 2);
             chm_task_wait_period();
         }
-        chm_dev_close(L->ad);
-        chm_dev_close(L->sd);
+        (void)chm_dev_close(L->ad);
+        (void)chm_dev_close(L->sd);
     }, &loop, &at), 0);
-    chm_kernel_run();
+    (void)chm_kernel_run();
     chm_kernel_fini();
     EXPECT_EQ(loop.cycles, 3000);
     EXPECT_LT(loop.err, 2e-3) << "position error after 3 s";

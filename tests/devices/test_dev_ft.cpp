@@ -191,7 +191,7 @@ TEST_F(Ft, ContactInterruptWakesATask) {
     ASSERT_EQ(chm_sem_init(&g_contact, CHM_SEM_COUNTING, 0, 0), 0);
     ASSERT_EQ(chm_irq_install(40, [](int, void*) {
         chm::test::drain(g_ev);  // level-triggered: consume what raised the line
-        chm_sem_v(&g_contact);
+        (void)chm_sem_v(&g_contact);
     }, nullptr), 0);
     ASSERT_EQ(chm_irq_attach_fd(40, g_ev, POLLIN), 0);
     chm_tid_t t;
@@ -201,9 +201,9 @@ TEST_F(Ft, ContactInterruptWakesATask) {
         if (g_p_result == 0 && chm_sensor_read(g_sd, &smp) == 0) g_fz = smp.v[2];
     }, nullptr, nullptr), 0);
     EXPECT_EQ(chm_kernel_run(), 0);
-    chm_irq_detach_fd(40);
-    chm_irq_remove(40);
-    chm_dev_close(g_sd);
+    (void)chm_irq_detach_fd(40);
+    (void)chm_irq_remove(40);
+    (void)chm_dev_close(g_sd);
     chm_kernel_fini();
     ASSERT_EQ(wait_child(child), 0);
     EXPECT_EQ(g_p_result, 0) << "no interrupt woke the task";

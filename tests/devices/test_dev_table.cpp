@@ -227,7 +227,7 @@ TEST_F(DevTable, TaskAbortClosesWhatTheTaskOpened) {
         auto* c = static_cast<AbortCtx*>(p);
         c->dd_a = chm_dev_open("regs0", CHM_DEV_READ);
         c->dd_b = chm_dev_open("regs0", CHM_DEV_RDWR);
-        chm_task_suspend(chm_task_self());  // until aborted
+        (void)chm_task_suspend(chm_task_self());  // until aborted
     }, &ctx, &at), 0);
     at.name = "aborter";
     at.priority = 1;
@@ -235,7 +235,7 @@ TEST_F(DevTable, TaskAbortClosesWhatTheTaskOpened) {
     ASSERT_EQ(chm_task_spawn(&b, [](void* p) {
         auto* c = static_cast<AbortCtx*>(p);
         c->closed = chm_dev_task_abort(c->a);
-        chm_task_destroy(c->a);
+        (void)chm_task_destroy(c->a);
     }, &ctx, &at), 0);
     EXPECT_EQ(chm_kernel_run(), 0);
     chm_kernel_fini();
@@ -273,8 +273,8 @@ TEST_F(DevTable, RefusalsAreErrorSignalsWhenGlobalHandlingIsOn) {
     ASSERT_EQ(chm_task_spawn(&t, [](void* p) {
         auto* c = static_cast<ErrCtx*>(p);
         c->quiet_status = chm_dev_open("nodev", CHM_DEV_READ);  // global off: just a status
-        chm_err_global(1);
-        chm_err_on_module(chm_dev_err_module(), [](const chm_err_info_t* i, void* a) {
+        (void)chm_err_global(1);
+        (void)chm_err_on_module(chm_dev_err_module(), [](const chm_err_info_t* i, void* a) {
             auto* c = static_cast<ErrCtx*>(a);
             c->calls++;
             c->code = i->code;
@@ -285,13 +285,13 @@ TEST_F(DevTable, RefusalsAreErrorSignalsWhenGlobalHandlingIsOn) {
         const int dd = chm_dev_open("regs0", CHM_DEV_READ);
         char b;
         c->read_status = chm_dev_pread(dd, &b, 1, 64);
-        chm_dev_close(dd);
+        (void)chm_dev_close(dd);
     }, &ctx, &at), 0);
     at.priority = 2;
     ASSERT_EQ(chm_task_spawn(&t, [](void* p) {
         auto* c = static_cast<ErrCtx*>(p);
-        chm_err_global(1);
-        chm_dev_open("arm9", CHM_DEV_READ);  // no handler: the default aborts this task
+        (void)chm_err_global(1);
+        (void)chm_dev_open("arm9", CHM_DEV_READ);  // no handler: the default aborts this task
         c->after_default = true;
     }, &ctx, &at), 0);
     at.priority = 1;

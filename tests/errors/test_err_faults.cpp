@@ -36,7 +36,7 @@ void sibling(void*) {
 
 void waiter(void*) {
     g_waiter_result = chm_sem_p(&g_lock);
-    if (g_waiter_result == -EOWNERDEAD) chm_sem_v(&g_lock);
+    if (g_waiter_result == -EOWNERDEAD) (void)chm_sem_v(&g_lock);
 }
 
 __attribute__((noinline)) int recurse(int n) {
@@ -194,16 +194,16 @@ TEST(ErrFaults, PreemptionNearTheGuardPageAbortsOnlyTheTask) {
 // A handler may take the task back to a mark after a fault; the task lives on.
 chm_err_action_t back(const chm_err_info_t*, void*) { return CHM_ERR_TO_MARK; }
 void recovers(void*) {
-    chm_err_on_module(CHM_ERR_CPU, back, nullptr);
+    (void)chm_err_on_module(CHM_ERR_CPU, back, nullptr);
     chm_err_mark_t m;
     volatile int faults = 0;
     const int v = chm_err_mark(&m);
     faults = faults + (v != 0);
     if (faults < 3) do_fault(Fault::Null);
-    chm_err_unmark(&m);
+    (void)chm_err_unmark(&m);
     std::fprintf(stderr, "RECOVERED v=%d faults=%d\n", v, int(faults));
-    chm_sem_p(&g_lock);
-    chm_sem_v(&g_lock);
+    (void)chm_sem_p(&g_lock);
+    (void)chm_sem_v(&g_lock);
 }
 TEST(ErrFaults, HandlerReturnsToAMarkAfterAFault) {
     const ChildResult r = run_child([] { return run_rtpu_with(recovers); });
@@ -233,7 +233,7 @@ chm_err_action_t faulting_handler(const chm_err_info_t*, void*) {
     return CHM_ERR_CONTINUE;
 }
 void fault_in_handler(void*) {
-    chm_err_on_task(faulting_handler, nullptr);
+    (void)chm_err_on_task(faulting_handler, nullptr);
     chm_err_invoke(CHM_ERR_KERNEL, CHM_EK_HEAP);
 }
 TEST(ErrFaults, FaultInsideAnErrorHandlerFailStops) {

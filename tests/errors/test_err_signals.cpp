@@ -161,7 +161,7 @@ TEST_F(ErrSignals, ScopeThenCodeThenModuleThenTask) {
 // by another.
 volatile bool g_other_aborted = true;
 void installs(void*) {
-    chm_err_on_module(valve_module(), rec, (void*)"mine");
+    (void)chm_err_on_module(valve_module(), rec, (void*)"mine");
     chm_task_yield();
 }
 void relies_on_someone_elses(void*) {
@@ -196,13 +196,13 @@ void deep(int n) {
 }
 void mark_body(void*) {
     chm_err_scope_t s;
-    chm_err_on_task(to_mark, nullptr);
+    (void)chm_err_on_task(to_mark, nullptr);
     chm_err_mark_t m;
     volatile int passes = 0;
     const int v = chm_err_mark(&m);
     passes = passes + 1;
     if (v == 0) {
-        chm_err_scope_push(&s, rec_pass, (void*)"scope");  // popped by the return
+        (void)chm_err_scope_push(&s, rec_pass, (void*)"scope");  // popped by the return
         deep(10);
     }
     g_mark_value = v;
@@ -229,8 +229,8 @@ TEST_F(ErrSignals, ReturnToMarkUnwindsAndPopsScopes) {
 }
 
 void continue_then_abort(void*) {
-    chm_err_on_code(valve_module(), 7, rec, (void*)"cont");
-    chm_err_on_code(valve_module(), 8, abort_it, nullptr);
+    (void)chm_err_on_code(valve_module(), 7, rec, (void*)"cont");
+    (void)chm_err_on_code(valve_module(), 8, abort_it, nullptr);
     EXPECT_EQ(chm_err_invoke(valve_module(), 7), 0);
     g_log.push_back("continued");
     chm_err_invoke(valve_module(), 8);
@@ -252,7 +252,7 @@ chm_err_action_t raises_again(const chm_err_info_t*, void*) {
     return CHM_ERR_CONTINUE;
 }
 void nested_raise(void*) {
-    chm_err_on_code(valve_module(), 7, raises_again, nullptr);
+    (void)chm_err_on_code(valve_module(), 7, raises_again, nullptr);
     chm_err_invoke(valve_module(), 7);
     g_log.push_back("not reached either");
 }
@@ -283,12 +283,12 @@ void open_off(void*) {
 void open_on_handled(void*) {
     EXPECT_EQ(chm_err_global(1), 0);
     EXPECT_EQ(chm_err_global_get(), 1);
-    chm_err_on_module(CHM_ERR_UNIX, note, nullptr);
+    (void)chm_err_on_module(CHM_ERR_UNIX, note, nullptr);
     g_ret = chm_open("/nonexistent/chimera-errors", O_RDONLY);
     g_errno = errno;
 }
 void open_on_default(void*) {
-    chm_err_global(1);
+    (void)chm_err_global(1);
     const int fd = chm_open("/nonexistent/chimera-errors", O_RDONLY);  // the paper's line
     g_ret = fd;
     g_log.push_back("not reached");
@@ -326,8 +326,8 @@ TEST_F(ErrSignals, GlobalOnOpenWithoutHandlerAbortsWithTheLine) {
 
 chm_sem_t g_bad_sem;  // never initialised
 void kernel_calls_on(void*) {
-    chm_err_global(1);
-    chm_err_on_module(CHM_ERR_KERNEL, note, nullptr);
+    (void)chm_err_global(1);
+    (void)chm_err_on_module(CHM_ERR_KERNEL, note, nullptr);
     g_ret = chm_sem_p(&g_bad_sem);
     g_log.push_back(g_seen);
     g_seen.clear();
@@ -335,10 +335,10 @@ void kernel_calls_on(void*) {
     g_log.push_back(g_seen);
     g_seen.clear();
     chm_sem_t s;
-    chm_sem_init(&s, CHM_SEM_BINARY, 0, 0);
+    (void)chm_sem_init(&s, CHM_SEM_BINARY, 0, 0);
     g_log.push_back(std::to_string(chm_sem_p_timed(&s, 1000)));  // an outcome: not raised
     g_log.push_back(g_seen);
-    chm_err_global(0);
+    (void)chm_err_global(0);
     g_log.push_back(std::to_string(chm_task_resume(12345)));
     g_log.push_back(g_seen);
 }
@@ -396,7 +396,7 @@ chm_err_action_t abort_on_miss(const chm_err_info_t* info, void*) {
     return CHM_ERR_ABORT;
 }
 void overruns_strict(void*) {
-    chm_err_on_code(CHM_ERR_KERNEL, CHM_EK_DEADLINE, abort_on_miss, nullptr);
+    (void)chm_err_on_code(CHM_ERR_KERNEL, CHM_EK_DEADLINE, abort_on_miss, nullptr);
     overruns(nullptr);
 }
 TEST_F(ErrSignals, DeadlineMissHandlerMayAbortTheTask) {
@@ -414,18 +414,18 @@ std::vector<int> g_p_results;
 void holder_dies(void*) {
     ASSERT_EQ(chm_sem_p(&g_lock), 0);
     chm_task_yield();  // let the waiter queue up
-    chm_err_on_task(abort_it, nullptr);
+    (void)chm_err_on_task(abort_it, nullptr);
     chm_err_invoke(valve_module(), 7);
 }
 void waiter(void*) {
     g_p_results.push_back(chm_sem_p(&g_lock));  // blocks until the holder dies
     g_p_results.push_back(chm_sem_v(&g_lock));
     g_p_results.push_back(chm_sem_p(&g_lock));  // a healthy semaphore again
-    chm_sem_v(&g_lock);
+    (void)chm_sem_v(&g_lock);
 }
 void holder_dies_alone(void*) {
-    chm_sem_p(&g_lock);
-    chm_err_on_task(abort_it, nullptr);
+    (void)chm_sem_p(&g_lock);
+    (void)chm_err_on_task(abort_it, nullptr);
     chm_err_invoke(valve_module(), 7);
 }
 void later(void*) {
@@ -459,17 +459,17 @@ chm_sem_t g_shared;
 int g_done = 0;
 void injector(void* arg) {
     const int n = int(reinterpret_cast<intptr_t>(arg));
-    chm_err_on_module(valve_module(), abort_it, nullptr);  // quiet aborts
-    chm_err_global(1);
-    chm_sem_p(&g_shared);
+    (void)chm_err_on_module(valve_module(), abort_it, nullptr);  // quiet aborts
+    (void)chm_err_global(1);
+    (void)chm_sem_p(&g_shared);
     if (n % 3 == 0) {
         chm_err_mark_t m;
         if (chm_err_mark(&m) == 0) {
-            chm_err_on_task(to_mark, nullptr);
+            (void)chm_err_on_task(to_mark, nullptr);
             chm_err_invoke(CHM_ERR_KERNEL, CHM_EK_HEAP);
         }
-        chm_err_unmark(&m);
-        chm_sem_v(&g_shared);
+        (void)chm_err_unmark(&m);
+        (void)chm_sem_v(&g_shared);
         ++g_done;
         return;
     }

@@ -127,7 +127,7 @@ TEST_F(HostTest, ALaterAttachmentMakesItsOwnTransferSegment) {
         std::string back(big.size(), 0);
         EXPECT_EQ(chm_xfs_read(fd, back.data(), back.size()), std::int64_t(big.size())) << chm_xfs_last_error();
         EXPECT_TRUE(back == big) << "the bytes read differ";
-        chm_xfs_close(fd);
+        (void)chm_xfs_close(fd);
     };
     read_big();
     ASSERT_EQ(chm_bp_leave(), 0);
@@ -229,7 +229,7 @@ TEST_F(HostTest, IoctlPassesItsArgumentBothWays) {
     char big[300];
     EXPECT_EQ(chm_xfs_ioctl(fd, FIONREAD, big, sizeof big), -EINVAL);
     EXPECT_EQ(chm_xfs_ioctl(fd + 1000, FIONREAD, &avail, sizeof avail), -EBADF);
-    chm_xfs_close(fd);
+    (void)chm_xfs_close(fd);
 }
 
 TEST_F(HostTest, EveryEscapeIsRefused) {
@@ -252,7 +252,7 @@ TEST_F(HostTest, EveryEscapeIsRefused) {
     // ".." that stays inside is fine.
     const int fd = chm_xfs_open("sub/../hello.txt", CHM_XFS_RDONLY, 0);
     EXPECT_GE(fd, 0) << chm_xfs_last_error();
-    chm_xfs_close(fd);
+    (void)chm_xfs_close(fd);
 }
 
 TEST_F(HostTest, ChdirGetcwdGetenv) {
@@ -265,7 +265,7 @@ TEST_F(HostTest, ChdirGetcwdGetenv) {
     EXPECT_EQ(chm_xfs_open("hello.txt", CHM_XFS_RDONLY, 0), -ENOENT);
     int fd = chm_xfs_open("../hello.txt", CHM_XFS_RDONLY, 0);
     EXPECT_GE(fd, 0) << chm_xfs_last_error();
-    chm_xfs_close(fd);
+    (void)chm_xfs_close(fd);
     EXPECT_EQ(chm_host_chdir("hello"), -ENOENT);
     EXPECT_EQ(chm_host_chdir("../hello.txt"), -ENOTDIR);
     ASSERT_EQ(chm_host_chdir(".."), 0);

@@ -86,7 +86,7 @@ protected:
         path_ = dir_ + "/test.bp";
     }
     void TearDown() override {
-        chm_bp_leave();  // -ENOTCONN when not attached
+        (void)(void)chm_bp_leave();  // -ENOTCONN when not attached
         for (pid_t p : children_) {
             kill(p, SIGKILL);
             waitpid(p, nullptr, 0);

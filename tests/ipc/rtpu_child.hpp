@@ -36,7 +36,7 @@ int run_rtpu(const std::string& path, int slot, Spawn spawn_tasks, RtpuOptions o
     const int r = chm_kernel_run();
     if (!o.virtual_clock) chm::ipc::wake_unbind_kernel();
     chm_kernel_fini();
-    chm_bp_leave();
+    (void)(void)chm_bp_leave();
     return r;
 }
 

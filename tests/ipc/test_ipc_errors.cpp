@@ -62,15 +62,15 @@ void bad_calls() {
 }
 
 void controller(void*) {
-    chm_err_global(g_global ? 1 : 0);
-    chm_err_on_module(chm_ipc_err_module(), record, nullptr);
+    (void)chm_err_global(g_global ? 1 : 0);
+    (void)chm_err_on_module(chm_ipc_err_module(), record, nullptr);
     bad_calls();
 }
 
 void unhandled(void*) {
-    chm_err_global(1);
+    (void)chm_err_global(1);
     chm_rsem_t* s = nullptr;
-    chm_rsem_open("no-such-sem", &s);  // the default handler aborts the task here
+    (void)chm_rsem_open("no-such-sem", &s);  // the default handler aborts the task here
     g_after_abort = true;
 }
 

@@ -234,7 +234,7 @@ void receiver(void*) {
     g_board->woken_at = g_board->ticks.load();
     if (n != 14 || std::strcmp(buf, "wake up, task") != 0 || info.type != 77) chm_kernel_stop(10);
     chm_msgq_info_t st{};
-    for (int i = 0; i < 20000 && (chm_msgq_info(g_up, &st), st.receivers_waiting == 0); ++i)
+    for (int i = 0; i < 20000 && ((void)chm_msgq_info(g_up, &st), st.receivers_waiting == 0); ++i)
         chm_task_pause_until(chm_time_now() + 1'000'000);
     if (st.receivers_waiting != 1) chm_kernel_stop(11);
     if (chm_msgq_send(g_up, 78, 0, "and you, host", 14)) chm_kernel_stop(12);

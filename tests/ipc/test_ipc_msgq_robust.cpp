@@ -37,7 +37,7 @@ protected:
             chm_msgq_t* h = nullptr;
             char buf[8];
             if (chm_msgq_open("rx", &h)) return 2;
-            chm_msgq_receive(h, buf, sizeof buf, nullptr);
+            (void)chm_msgq_receive(h, buf, sizeof buf, nullptr);
             return 3;
         });
     }
@@ -67,7 +67,7 @@ chm_msgq_t* g_q;
 
 void parked_receiver(void*) {
     char buf[8];
-    chm_msgq_receive(g_q, buf, sizeof buf, nullptr);
+    (void)chm_msgq_receive(g_q, buf, sizeof buf, nullptr);
     chm_kernel_stop(1);
 }
 
@@ -311,10 +311,10 @@ TEST_F(IpcMsgqRobust, RandomKillsDuringChurnLeaveAConsistentQueue) {
             ready.put('r');
             char buf[24] = {};
             for (std::uint32_t i = 0;; ++i) {
-                chm_msgq_try_send(h, i, i % 5, buf, 1 + i % 24);
-                chm_msgq_try_send(h, i, (i * 7) % 32, buf, 24);
-                chm_msgq_try_receive(h, buf, sizeof buf, nullptr);
-                if (i % 3 == 0) chm_msgq_try_receive(h, buf, sizeof buf, nullptr);
+                (void)chm_msgq_try_send(h, i, i % 5, buf, 1 + i % 24);
+                (void)chm_msgq_try_send(h, i, (i * 7) % 32, buf, 24);
+                (void)chm_msgq_try_receive(h, buf, sizeof buf, nullptr);
+                if (i % 3 == 0) (void)chm_msgq_try_receive(h, buf, sizeof buf, nullptr);
             }
         });
         ASSERT_EQ(ready.get(), 'r');

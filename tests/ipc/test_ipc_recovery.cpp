@@ -85,7 +85,7 @@ TEST_F(IpcRecovery, SameRtpuRejoinsAfterKillWithoutCleanup) {
         const pid_t c = spawn([&] {
             if (chm_bp_join(path_.c_str(), 5, "servo")) return 1;
             chm_bp_status_t st;
-            chm_bp_status(&st);
+            (void)chm_bp_status(&st);
             report.put(char(st.slot[5].generation));
             ready.put('r');
             pause();
@@ -208,9 +208,9 @@ TEST_F(IpcRecovery, KilledWhileCreatingAndDestroyingLeavesAConsistentFile) {
             for (unsigned i = 0;; ++i) {
                 std::snprintf(name, sizeof name, "churn%u", i % 6);
                 void* q = nullptr;
-                if (chm_shm_create(name, 64 + (i % 5) * 700, i % 3 ? CHM_SHM_COMMON : 1, &q) == 0) chm_shm_detach(q);
+                if (chm_shm_create(name, 64 + (i % 5) * 700, i % 3 ? CHM_SHM_COMMON : 1, &q) == 0) (void)chm_shm_detach(q);
                 std::snprintf(name, sizeof name, "churn%u", (i + 3) % 6);
-                chm_shm_destroy(name);
+                (void)chm_shm_destroy(name);
             }
         });
         ASSERT_EQ(ready.get(), 'r');
@@ -237,7 +237,7 @@ TEST_F(IpcRecovery, KilledWhileCreatingAndDestroyingLeavesAConsistentFile) {
     char name[16];
     for (int i = 0; i < 6; ++i) {
         std::snprintf(name, sizeof name, "churn%d", i);
-        chm_shm_destroy(name);
+        (void)chm_shm_destroy(name);
     }
     ASSERT_EQ(chm_bp_status(&st), 0);
     EXPECT_EQ(st.objects, 0u);

@@ -114,7 +114,7 @@ volatile int g_order[2];
 volatile int g_n_woken = 0;
 void ranked_waiter(void* arg) {
     chm_rsem_t* s = nullptr;
-    chm_rsem_open("sem", &s);
+    (void)chm_rsem_open("sem", &s);
     if (chm_rsem_p_timed(s, kWait) == 0) {
         const int k = g_n_woken;
         g_order[k] = int(reinterpret_cast<intptr_t>(arg));
@@ -152,7 +152,7 @@ TEST_F(Rsem, AWaiterKilledWhileBlockedIsRemovedAndItsVGoesToTheCount) {
         if (chm_bp_attach_host(path.c_str(), "victim", nullptr) != 0) return 90;
         chm_rsem_t* c = nullptr;
         if (chm_rsem_open("sem", &c) != 0) return 91;
-        chm_rsem_p_timed(c, kWait);
+        (void)chm_rsem_p_timed(c, kWait);
         return 92;
     });
     ASSERT_TRUE(until_waiting(s, 1));

@@ -234,7 +234,7 @@ TEST_F(IpcSpin, HolderKilledNextLockerGetsOwnerDead) {
 std::atomic<int> g_waiter_result{1};
 chm_spin_t* g_lock = nullptr;
 
-void waiter(void*) { g_waiter_result = chm_spin_lock(g_lock, 200'000, 5'000'000'000ull); chm_spin_unlock(g_lock); }
+void waiter(void*) { g_waiter_result = chm_spin_lock(g_lock, 200'000, 5'000'000'000ull); (void)chm_spin_unlock(g_lock); }
 
 void holder(void*) {
     if (chm_spin_lock(g_lock, 1000, 1'000'000'000) != 0) return;
@@ -243,8 +243,8 @@ void holder(void*) {
     attr.priority = 10;  // more urgent than us: it runs at once and spins
     attr.name = "waiter";
     chm_tid_t tid;
-    chm_task_spawn(&tid, waiter, nullptr, &attr);
-    chm_spin_unlock(g_lock);  // reached only if the waiter gave the CPU away
+    (void)chm_task_spawn(&tid, waiter, nullptr, &attr);
+    (void)chm_spin_unlock(g_lock);  // reached only if the waiter gave the CPU away
 }
 
 TEST_F(IpcSpin, SpinningTaskYieldsToItsRtpusOtherTasks) {

@@ -96,7 +96,7 @@ void busy_then_flag(void*) {
     const uint64_t end = chm_time_now() + 100 * kMs;
     while (chm_time_now() < end) {
     }
-    if (chm_rsem_t* f = open_sem("flag")) chm_rsem_v(f);
+    if (chm_rsem_t* f = open_sem("flag")) (void)chm_rsem_v(f);
 }
 
 TEST_F(Spin, ATaskThatCannotSpinParksAndTheIdlePollWatchesIt) {
@@ -116,7 +116,7 @@ TEST_F(Spin, ATaskThatCannotSpinParksAndTheIdlePollWatchesIt) {
 // waiter parks and the task runs, long before the 60 s poll would end.
 void pause_then_flag(void*) {
     pause_ms(100);
-    if (chm_rsem_t* f = open_sem("flag")) chm_rsem_v(f);
+    if (chm_rsem_t* f = open_sem("flag")) (void)chm_rsem_v(f);
 }
 
 TEST_F(Spin, ATaskMadeReadyEndsTheSpin) {
@@ -129,7 +129,7 @@ TEST_F(Spin, ATaskMadeReadyEndsTheSpin) {
     ASSERT_TRUE(until_waiting(sem_, 1));
     EXPECT_EQ(chm_rsem_p_timed(flag_, kWait), 0) << "the spin kept the lower-priority task from running";
     EXPECT_EQ(chm_rsem_waiting(sem_), 1);  // still waiting, parked now
-    chm_rsem_v(sem_);
+    (void)chm_rsem_v(sem_);
     EXPECT_EQ(reap(child), 0);
 }
 
@@ -154,7 +154,7 @@ TEST_F(Spin, AMoreUrgentTaskPreemptsTheSpin) {
 void on_signal(int, void*) { g_handled = g_handled + 1; }
 
 void signalled_waiter(void*) {
-    chm_usig_handle(1, on_signal, nullptr);
+    (void)chm_usig_handle(1, on_signal, nullptr);
     waiter(nullptr);
 }
 
@@ -163,7 +163,7 @@ void signaller(void*) {
     chm_rsem_t* s = open_sem("sem");
     for (int i = 0; s && i < 2000 && chm_rsem_waiting(s) != 1; ++i) pause_ms(5);
     pause_ms(20);
-    chm_usig_send(g_waiter, 1);
+    (void)chm_usig_send(g_waiter, 1);
 }
 
 TEST_F(Spin, AUserSignalInterruptsTheSpin) {

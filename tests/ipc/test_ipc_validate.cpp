@@ -119,7 +119,7 @@ protected:
                 r = chm_msgq_open("q", &q);
         }
         *why = chm_bp_last_error();
-        chm_bp_leave();
+        (void)chm_bp_leave();
         return r;
     }
     void run(const Case& c) {
@@ -140,7 +140,7 @@ protected:
         }
         munmap(img_.base, img_.size);
         img_ = Image{};
-        chm_bp_leave();
+        (void)chm_bp_leave();
         remove_dir();
         dir_ = make_private_dir("chm-ipc-");
         path_ = dir_ + "/test.bp";

@@ -276,7 +276,7 @@ void muf_driver(void*) {
         std::sort(got.begin(), got.end());
         ASSERT_EQ(got, reference_set(live)) << "after step " << step;
     }
-    for (const Spec& s : live) chm_task_destroy(s.id);
+    for (const Spec& s : live) (void)chm_task_destroy(s.id);
 }
 
 TEST_F(Dispatch, MufCriticalSetMatchesARecomputationAfterEveryChange) {
@@ -326,7 +326,7 @@ void muf_queued_driver(void*) {
     std::vector<chm_tid_t> ran = g_first;
     std::sort(ran.begin(), ran.end());
     EXPECT_EQ(ran, members);
-    for (const Spec& s : all) chm_task_destroy(s.id);
+    for (const Spec& s : all) (void)chm_task_destroy(s.id);
 }
 
 TEST_F(Dispatch, MufMembershipChangesReorderQueuedTasks) {

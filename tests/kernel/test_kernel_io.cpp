@@ -242,12 +242,12 @@ volatile int g_handled = 0;
 chm_tid_t g_reader_id;
 void on_usig(int, void*) { g_handled = g_handled + 1; }
 void interruptible_reader(void*) {
-    chm_usig_handle(3, on_usig, nullptr);
+    (void)chm_usig_handle(3, on_usig, nullptr);
     measured([] { return ::read(g_fd[0], g_out.buf, sizeof g_out.buf); });
 }
 void signaller(void*) {
     usleep(20000);
-    chm_usig_send(g_reader_id, 3);
+    (void)chm_usig_send(g_reader_id, 3);
 }
 
 TEST_F(BlockingIo, AUserSignalInterruptsARead) {

@@ -45,7 +45,7 @@ public:
     static inline volatile int g_handler_p;
 };
 
-void v_handler(int, void*) { chm_sem_v(Irq::g_sem); }
+void v_handler(int, void*) { (void)chm_sem_v(Irq::g_sem); }
 
 // Waits for the semaphore a handler Vs, `n` times, then stops everything.
 void waiter(void* arg) {
@@ -66,7 +66,7 @@ TEST_F(Irq, AMailboxVectorRaisedByAForeignThreadWakesAnIdleRtpu) {
     start(CHM_SCHED_MUF, false);
     ASSERT_EQ(chm_irq_install(3, v_handler, nullptr), 0);
     spawn(waiter, reinterpret_cast<void*>(1), "waiter", 5);
-    later(50, [] { chm_irq_raise(3); });
+    later(50, [] { (void)chm_irq_raise(3); });
     ASSERT_EQ(chm_kernel_run(), 0);
     EXPECT_EQ(g_woke, 1);
     EXPECT_EQ(chm_irq_count(3), 1u);
@@ -79,7 +79,7 @@ TEST_F(Irq, AnInterruptPreemptsABusyTaskForTheTaskItWakes) {
     spawn(spinner, nullptr, "spinner", 1);  // only the waiter's end stops it
     later(30, [] {
         for (int i = 0; i < 3; ++i) {
-            chm_irq_raise(40);
+            (void)chm_irq_raise(40);
             std::this_thread::sleep_for(std::chrono::milliseconds(20));
         }
     });
@@ -110,7 +110,7 @@ TEST_F(Irq, ARaiseBeforeAHandlerIsDeliveredOnInstall) {
 int g_pipe[2];
 void read_and_v(int, void*) {
     char c;
-    if (::read(g_pipe[0], &c, 1) == 1) chm_sem_v(Irq::g_sem);
+    if (::read(g_pipe[0], &c, 1) == 1) (void)chm_sem_v(Irq::g_sem);
 }
 
 TEST_F(Irq, ALineBoundToADescriptorFiresWhenItIsReadableIdleOrBusy) {
@@ -137,7 +137,7 @@ TEST_F(Irq, ALineBoundToADescriptorFiresWhenItIsReadableIdleOrBusy) {
 
 void p_in_handler(int, void*) { Irq::g_handler_p = chm_sem_p(Irq::g_sem); }
 
-void raise_then_stop(void*) { chm_irq_raise(12); }
+void raise_then_stop(void*) { (void)chm_irq_raise(12); }
 
 TEST_F(Irq, AHandlerThatWouldWaitIsRefused) {
     start(CHM_SCHED_MUF, false);
@@ -186,7 +186,7 @@ TEST_F(IrqPoll, ARingWhileTheRtpuPollsItsDoorbellWakesTheTask) {
     static volatile uint32_t seen_state = 99;
     later(30, [] {
         seen_state = __atomic_load_n(chm::port::doorbell().state, __ATOMIC_SEQ_CST);
-        chm_irq_raise(4);
+        (void)chm_irq_raise(4);
     });
     ASSERT_EQ(chm_kernel_run(), 0);
     EXPECT_EQ(g_woke, 1);

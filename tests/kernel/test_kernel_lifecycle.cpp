@@ -269,7 +269,7 @@ void refusals(void*) {
     const chm_task_timing_t bad[] = {{0, 0, 0, 0}, {10 * kMs, 11 * kMs, 0, 0}, {10 * kMs, 5 * kMs, 6 * kMs, 0}};
     for (const auto& b : bad) EXPECT_EQ(chm_task_set_timing(g_self, &b), -EINVAL);
     EXPECT_EQ(chm_task_set_timing(g_self, &t), 0);
-    chm_task_destroy(g_self);
+    (void)chm_task_destroy(g_self);
 }
 void periodic_idle(void*) {
     for (;;) chm_task_wait_period();

@@ -99,7 +99,7 @@ void pi_high(void*) {
     g_log += "H";
     ASSERT_EQ(chm_sem_p(&g_mutex), 0);
     g_log += "h";
-    chm_sem_v(&g_mutex);
+    (void)chm_sem_v(&g_mutex);
 }
 void pi_mid(void*) {
     chm_task_pause_until(1 * kMs);
@@ -126,7 +126,7 @@ void on_sig(int signo, void* arg) {
     g_log += "S" + std::to_string(signo);
     char name[32];
     chm_task_status_t st;
-    chm_task_status(chm_task_self(), &st);
+    (void)chm_task_status(chm_task_self(), &st);
     g_handled_by = st.name;
     (void)name;
     (void)arg;
@@ -222,7 +222,7 @@ TEST_F(Sync, DeadlineHandlerMayLetTheCycleContinue) {
 bool g_hook_ran = false;
 void shutdown_hook(void*) { g_hook_ran = true; }
 void stopper_body(void*) {
-    chm_kernel_on_shutdown(shutdown_hook, nullptr);
+    (void)chm_kernel_on_shutdown(shutdown_hook, nullptr);
     chm_time_consume(6 * kMs);
     ADD_FAILURE() << "the RTPU should have stopped at the deadline";
 }

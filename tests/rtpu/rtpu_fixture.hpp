@@ -74,7 +74,7 @@ protected:
                 for (std::uint32_t s = 0; s < st.slots; ++s)
                     if (int(s) != st.self && st.slot[s].pid > 0) kill(st.slot[s].pid, SIGKILL);
         }
-        chm_bp_leave();
+        (void)(void)(void)chm_bp_leave();
         for (pid_t p : children_) {
             kill(p, SIGKILL);
             waitpid(p, nullptr, 0);

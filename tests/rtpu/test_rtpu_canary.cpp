@@ -38,7 +38,7 @@ std::uint64_t start_time(pid_t pid) {
 class CanaryTest : public RtpuTest {
 protected:
     void TearDown() override {
-        if (chm_bp_self() >= 0) chm_bp_leave();  // never the copy at teardown: its table names the canary
+        if (chm_bp_self() >= 0) (void)chm_bp_leave();  // never the copy at teardown: its table names the canary
         if (canary_ > 0) {
             kill(canary_, SIGKILL);
             waitpid(canary_, nullptr, 0);
@@ -147,8 +147,8 @@ TEST_F(CanaryTest, NoSignalReachesAProcessTheTableNamesFalsely) {
 
     // This process on the copy: express mail, a V and a send that grant
     // the parked tasks of slots 1 and 2 (their RTPUs are rung).
-    chm_rsem_close(s);
-    chm_msgq_close(q);
+    (void)chm_rsem_close(s);
+    (void)chm_msgq_close(q);
     ASSERT_EQ(chm_bp_leave(), 0);
     ASSERT_EQ(chm_bp_attach_host(copy.c_str(), "prober", nullptr), 0) << chm_bp_last_error();
     chm_rtpu_timeout_set(500'000'000);
@@ -163,13 +163,13 @@ TEST_F(CanaryTest, NoSignalReachesAProcessTheTableNamesFalsely) {
                 contains(chm_bp_last_error(), "slot 1: " + pid_text))
         << chm_bp_last_error();
     EXPECT_TRUE(canary_alive()) << "semaphore wake: " << canary_status_;
-    chm_rsem_close(s);
+    (void)chm_rsem_close(s);
 
     ASSERT_EQ(chm_msgq_open("q", &q), 0) << chm_bp_last_error();
     EXPECT_EQ(chm_msgq_try_send(q, 1, 0, "hello", 6), 0) << chm_bp_last_error();
     EXPECT_TRUE(contains(chm_bp_last_error(), "slot 2: " + pid_text)) << chm_bp_last_error();
     EXPECT_TRUE(canary_alive()) << "queue wake: " << canary_status_;
-    chm_msgq_close(q);
+    (void)chm_msgq_close(q);
 
     // Recovery: slot 2 shown RECOVERING by the canary, whose start time
     // no longer matches, so this host's monitor takes the recovery over
@@ -219,7 +219,7 @@ TEST_F(CanaryTest, AnRtpuDropsItsCapabilitiesAndRootIsNotNeeded) {
     EXPECT_EQ(chm_rtpu_ping(1, &info), 0) << chm_bp_last_error();
     EXPECT_EQ(chm_rtpu_ping(2, &info), 0) << chm_bp_last_error();
 
-    chm_bp_leave();
+    (void)chm_bp_leave();
     const std::string other = dir_ + "/root.bp";
     unsetenv("CHIMERA_AS_ROOT");  // the test environment sets it
     Outcome r = run({CHIMERA_BIN, "start", "--backplane", other, "--rtpus", "1"});

@@ -205,11 +205,11 @@ TEST_F(CliTest, ObjectsListsEveryKindWithItsFigures) {
     EXPECT_TRUE(contains(line_with(r.out, "cli_speed"), "double")) << r.out;
     EXPECT_TRUE(contains(line_with(r.out, "cli_speed"), "3x1")) << r.out;
     EXPECT_TRUE(contains(line_with(r.out, "cli_speed"), "m/s")) << r.out;
-    chm_msgq_close(full);
-    chm_msgq_close(empty);
-    chm_rsem_close(two);
-    chm_rsem_close(zero);
-    chm_shm_detach(seg);
+    (void)chm_msgq_close(full);
+    (void)chm_msgq_close(empty);
+    (void)chm_rsem_close(two);
+    (void)chm_rsem_close(zero);
+    (void)chm_shm_detach(seg);
 }
 
 TEST_F(CliTest, StatusWatchShowsTheTimingColumnsAndUtilisation) {
@@ -274,7 +274,7 @@ TEST_F(CliTest, StartRefusesARunningSystemAndKeepsItsLog) {
     EXPECT_EQ(st.slot[1].pid, pid);
     EXPECT_EQ(st.slot[2].state, CHM_BP_FREE);
     // Once it is stopped, a new start appends to the old log.
-    chm_bp_leave();
+    (void)chm_bp_leave();
     ASSERT_EQ(chimera({"stop"}).status, 0);
     r = chimera({"start", "--rtpus", "1"});
     ASSERT_EQ(r.status, 0) << r.err;

@@ -304,7 +304,7 @@ TEST_F(RtpuTest, ChimeraStartAsksTheHostForRealTime) {
                                       ", memory locked, idle poll 50 us"))
             << log;
     }
-    chm_bp_leave();
+    (void)chm_bp_leave();
     r = chimera({"stop"});
     EXPECT_EQ(r.status, 0) << r.err;
     EXPECT_FALSE(contains(r.out, "killed")) << r.out;

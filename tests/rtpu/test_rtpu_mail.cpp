@@ -243,7 +243,7 @@ TEST_F(RtpuTest, RingSurvivesDeadAndStuckSenders) {
         const pid_t c = fork();
         if (c == 0) {
             alarm(30);
-            chm_bp_attach_host(bp_.c_str(), "hog", nullptr);
+            (void)chm_bp_attach_host(bp_.c_str(), "hog", nullptr);
             chm::bp::Attachment* a = chm::bp::current();
             chm::bp::RingHeader* ring = a->ring(1);
             for (std::uint32_t i = 0; i < ring->capacity; ++i) {
@@ -273,7 +273,7 @@ TEST_F(RtpuTest, RingSurvivesDeadAndStuckSenders) {
     const pid_t locker = fork();
     if (locker == 0) {
         alarm(30);
-        chm_bp_attach_host(bp_.c_str(), "locker", nullptr);
+        (void)chm_bp_attach_host(bp_.c_str(), "locker", nullptr);
         chm::bp::Attachment* a = chm::bp::current();
         chm::bp::lock_acquire(*a, &a->ring(1)->lock, a->token, 1000, 1'000'000'000);
         _exit(0);

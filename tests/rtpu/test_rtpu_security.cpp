@@ -98,7 +98,7 @@ protected:
         EXPECT_TRUE(contains(r.err, says)) << r.err;
         EXPECT_EQ(chm_bp_attach_host(with_backplane ? path.c_str() : nullptr, "intruder", nullptr) < 0, true);
         EXPECT_TRUE(contains(chm_bp_last_error(), says)) << chm_bp_last_error();
-        chm_bp_leave();
+        (void)chm_bp_leave();
         EXPECT_TRUE(processes_naming(dir_).empty()) << "something was started on " << path;
         struct stat after{};
         EXPECT_EQ(lstat(path.c_str(), &after), 0) << path << " was removed";
@@ -162,7 +162,7 @@ TEST_F(SecurityTest, AFileMadeForAGroupIsSharedOnlyAsMade) {
     EXPECT_TRUE(wait_serving(1, p)) << read_file(err_of(1));
     kill(p, SIGTERM);
     EXPECT_EQ(reap(p), 0);
-    chm_bp_leave();
+    (void)chm_bp_leave();
     // Loosened further, or given to another group: refused.
     chmod(bp_.c_str(), 0666);
     expect_refused_everywhere(bp_, "others have access");

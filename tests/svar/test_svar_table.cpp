@@ -240,7 +240,7 @@ void claim_and_return(void*) {
     const char* outs[] = {"q"};
     chm_svar_set_t* s = nullptr;
     if (chm_svar_set_create("first", nullptr, 0, outs, 1, &s) == 0) *static_cast<double*>(chm_svar_set_local(s, "q")) = 5;
-    if (s) chm_svar_set_write(s);
+    if (s) (void)chm_svar_set_write(s);
     // returns without destroying the set: the task's end hook drops the claim
 }
 int g_second = -1;
@@ -281,7 +281,7 @@ TEST_F(Svar, AWriterDeadMidWriteBlocksNoReaderAndFreesItsClaim) {
         auto* v = static_cast<double*>(chm_svar_set_local(s, "v"));
         for (int n = 1; n <= 3; ++n) {
             for (int k = 0; k < 64; ++k) v[k] = n;
-            chm_svar_set_write(s);
+            (void)chm_svar_set_write(s);
         }
         // Write 4 half done: its buffer marked, half of it overwritten.
         sv::Entry* e = entry_of("v");

@@ -51,10 +51,10 @@ void writer(void*) {
     while (!b->stop.load(std::memory_order_relaxed)) {
         ++n;
         for (int k = 0; k < kElems; ++k) v[k] = double(n);
-        chm_svar_set_write(s);
+        (void)chm_svar_set_write(s);
     }
     b->writes.store(std::uint32_t(n));
-    chm_svar_set_destroy(s);
+    (void)chm_svar_set_destroy(s);
     chm_kernel_stop(0);
 }
 
@@ -87,7 +87,7 @@ void reader(void*) {
     b->backwards[g_reader] = std::uint32_t(backwards);
     b->distinct[g_reader] = std::uint32_t(distinct);
     if (b->readers_done.fetch_add(1) + 1 == 2) b->stop.store(1);
-    chm_svar_set_destroy(s);
+    (void)chm_svar_set_destroy(s);
     chm_kernel_stop(0);
 }
 

@@ -224,7 +224,7 @@ void on_signal_line(int, void*) {
         if (!g_signo) g_signo = int(si.ssi_signo);
         any = true;
     }
-    if (any) chm_sem_v(&g_stop);
+    if (any) (void)chm_sem_v(&g_stop);
 }
 
 void shutdown_task(void*) {
@@ -328,12 +328,12 @@ int main(int argc, char** argv) {
         chm::xmail::server_stop();
         chm::ipc::wake_unbind_kernel();
         chm_kernel_fini();
-        chm_bp_leave();
+        (void)chm_bp_leave();
         return 1;
     };
     if (int r = chm_kernel_init(&cfg)) {
         std::fprintf(stderr, "chimera-rtpu: RTPU %d: cannot start the kernel: %s\n", o.rtpu, std::strerror(-r));
-        chm_bp_leave();
+        (void)chm_bp_leave();
         return 1;
     }
     chm_err_rtpu_set(o.rtpu);
@@ -376,7 +376,7 @@ int main(int argc, char** argv) {
             chm::xmail::server_stop();
             chm::ipc::wake_unbind_kernel();
             chm_kernel_fini();
-            chm_bp_leave();
+            (void)chm_bp_leave();
             return 1;
         }
     }
@@ -398,7 +398,7 @@ int main(int argc, char** argv) {
     chm::xmail::server_stop();
     chm::ipc::wake_unbind_kernel();
     chm_kernel_fini();
-    chm_bp_leave();
+    (void)chm_bp_leave();
     if (g_signo)
         std::printf("chimera-rtpu: RTPU %d stopped by %s, left the backplane\n", o.rtpu, strsignal(g_signo));
     else

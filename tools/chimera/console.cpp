@@ -75,7 +75,7 @@ bool send_frame(std::uint32_t type, std::uint32_t rtpu, const void* data, std::u
 // Text for the terminal: above the line being edited, or as it is.
 void show(const std::string& text) {
     if (g.interactive) {
-        chm_cmdi_print_async(g.cmdi, text.c_str());
+        (void)chm_cmdi_print_async(g.cmdi, text.c_str());
     } else {
         std::fputs(text.c_str(), stdout);
         if (text.empty() || text.back() != '\n') std::fputc('\n', stdout);
@@ -92,7 +92,7 @@ void begin_commands() {
 void maybe_feed() {
     if (g.feeding || g.fg < 0 || g.wants[g.fg] < 0) return;
     if (g.interactive) {
-        chm_cmdi_interactive_end(g.cmdi);
+        (void)chm_cmdi_interactive_end(g.cmdi);
         g.interactive = false;
     }
     g.feeding = true;
@@ -139,7 +139,7 @@ bool on_server() {
         // A task's chm_host_run: the program has the terminal until it ends.
         g.lent = f.tid != 0;
         if (g.lent && g.interactive) {
-            chm_cmdi_interactive_end(g.cmdi);
+            (void)chm_cmdi_interactive_end(g.cmdi);
             g.interactive = false;
         } else if (!g.lent && !g.feeding) {
             begin_commands();
@@ -294,14 +294,14 @@ int cmd_rtpus(chm_cmdi_t* c, int, char**, void*) {
 }
 
 void add_commands(chm_cmdi_t* c) {
-    chm_cmdi_add(c, "load", cmd_load, nullptr, "RTPU PROGRAM [ARG...]",
+    (void)chm_cmdi_add(c, "load", cmd_load, nullptr, "RTPU PROGRAM [ARG...]",
                  "Load the control program PROGRAM on RTPU and start its main with the ARGs.");
-    chm_cmdi_add(c, "tasks", cmd_tasks, nullptr, "RTPU", "List the tasks of RTPU.");
-    chm_cmdi_add(c, "kill", cmd_kill, nullptr, "RTPU TASK", "Destroy task TASK (its id or name) of RTPU.");
-    chm_cmdi_add(c, "stop", cmd_stop, nullptr, "RTPU", "Stop RTPU (its shutdown hooks run).");
-    chm_cmdi_add(c, "fg", cmd_fg, nullptr, "RTPU",
+    (void)chm_cmdi_add(c, "tasks", cmd_tasks, nullptr, "RTPU", "List the tasks of RTPU.");
+    (void)chm_cmdi_add(c, "kill", cmd_kill, nullptr, "RTPU TASK", "Destroy task TASK (its id or name) of RTPU.");
+    (void)chm_cmdi_add(c, "stop", cmd_stop, nullptr, "RTPU", "Stop RTPU (its shutdown hooks run).");
+    (void)chm_cmdi_add(c, "fg", cmd_fg, nullptr, "RTPU",
                  "Give the terminal to RTPU: the next line typed while one of its tasks reads stdin goes to it.");
-    chm_cmdi_add(c, "rtpus", cmd_rtpus, nullptr, "", "The running RTPUs, which are this console's, who reads.");
+    (void)chm_cmdi_add(c, "rtpus", cmd_rtpus, nullptr, "", "The running RTPUs, which are this console's, who reads.");
 }
 
 }  // namespace
@@ -417,10 +417,10 @@ int cmd_console(const Options& o, const std::vector<const char*>& args) {
             }
         }
     }
-    if (g.interactive) chm_cmdi_interactive_end(g.cmdi);
+    if (g.interactive) (void)chm_cmdi_interactive_end(g.cmdi);
     chm_cmdi_destroy(g.cmdi);
     ::close(g.sock);
-    chm_bp_leave();
+    (void)chm_bp_leave();
     return 0;
 }
 

@@ -57,7 +57,7 @@ std::string queue_details(const char* name) {
     } else {
         s = std::string("(no details: ") + chm_bp_last_error() + ")";
     }
-    chm_msgq_close(q);
+    (void)chm_msgq_close(q);
     return s;
 }
 
@@ -65,7 +65,7 @@ std::string semaphore_details(const char* name) {
     chm_rsem_t* sem = nullptr;
     if (chm_rsem_open(name, &sem)) return std::string("(cannot open: ") + chm_bp_last_error() + ")";
     const int value = chm_rsem_value(sem), waiting = chm_rsem_waiting(sem);
-    chm_rsem_close(sem);
+    (void)chm_rsem_close(sem);
     if (value < 0 || waiting < 0) return "(no details: not a semaphore handle)";
     return "value " + std::to_string(value) + ", " + plural(unsigned(waiting), "waiter", "waiters");
 }
@@ -85,7 +85,7 @@ int cmd_objects(const Options& o) {
     }
     if (n < 0) {
         say("objects: %s", chm_bp_last_error());
-        chm_bp_leave();
+        (void)chm_bp_leave();
         return 1;
     }
     if (n == 0) std::printf("no named objects on %s\n", o.backplane.c_str());
@@ -119,7 +119,7 @@ int cmd_objects(const Options& o) {
         r = svar_list();
     }
     std::fflush(stdout);
-    chm_bp_leave();
+    (void)chm_bp_leave();
     return r;
 }
 

@@ -108,7 +108,7 @@ bool file_fit_to_use(const std::string& path) {
 
 int stop_attached(double timeout_s, bool quiet, int* refused_out, int only) {
     chm_bp_status_t st;
-    chm_bp_status(&st);
+    (void)chm_bp_status(&st);
     struct Victim {
         int slot, pid;
         std::uint32_t gen, status;  // status: the word the signals are checked against
@@ -135,7 +135,7 @@ int stop_attached(double timeout_s, bool quiet, int* refused_out, int only) {
     // Gone: the slot no longer holds that generation in a live state.
     auto gone = [](const Victim& x) {
         chm_bp_status_t now;
-        chm_bp_status(&now);
+        (void)chm_bp_status(&now);
         const chm_bp_slot_info_t& i = now.slot[x.slot];
         return i.generation != x.gen || !(i.state == CHM_BP_RUNNING || i.state == CHM_BP_JOINING ||
                                           i.state == CHM_BP_LEAVING) ||
@@ -183,12 +183,12 @@ int cmd_stop(const Options& o) {
     int refused = 0;
     stop_attached(o.timeout_s < 0 ? 5.0 : o.timeout_s, false, &refused);
     chm_bp_status_t st;
-    chm_bp_status(&st);
+    (void)chm_bp_status(&st);
     int hosts = 0;
     for (std::uint32_t s = 0; s < st.slots; ++s)
         if (int(s) != st.self && st.slot[s].kind == CHM_BP_KIND_HOST && st.slot[s].state == CHM_BP_RUNNING) ++hosts;
     if (hosts) std::printf("%d host program%s still attached\n", hosts, hosts == 1 ? "" : "s");
-    chm_bp_leave();
+    (void)chm_bp_leave();
     return refused ? 1 : 0;
 }
 

@@ -45,7 +45,7 @@ int cmd_svar_plan(const char* config) {
     std::map<std::string, std::size_t> bytes;
     for (std::size_t i = 0; i < chm_servo_system_svars(sys); ++i) {
         chm_svar_decl_t d;
-        chm_servo_system_svar(sys, i, &d);
+        (void)chm_servo_system_svar(sys, i, &d);
         bytes[d.name] = std::size_t(d.rows) * d.cols * elem_bytes(d.type);
     }
     std::vector<Row> rows;
@@ -53,7 +53,7 @@ int cmd_svar_plan(const char* config) {
     int status = 0;
     for (std::size_t i = 0; i < chm_servo_system_modules(sys) && status == 0; ++i) {
         chm_servo_system_entry_t e;
-        chm_servo_system_module_at(sys, i, &e);
+        (void)chm_servo_system_module_at(sys, i, &e);
         // Lazy: a module's calls into libchimera stay unresolved; nothing runs.
         void* dl = dlopen(e.path, RTLD_LAZY | RTLD_LOCAL);
         const auto* d = dl ? static_cast<const chm_module_desc_t*>(dlsym(dl, CHM_MODULE_SYMBOL)) : nullptr;
@@ -94,11 +94,11 @@ int cmd_svar_plan(const char* config) {
     std::map<int, double> per_rtpu;
     double total = 0, total_on = 0;
     sys = nullptr;
-    chm_servo_system_open(config, &sys);
+    (void)chm_servo_system_open(config, &sys);
     for (std::size_t i = 0; i < rows.size(); ++i) {
         const Row& r = rows[i];
         chm_servo_system_entry_t e;
-        chm_servo_system_module_at(sys, i, &e);
+        (void)chm_servo_system_module_at(sys, i, &e);
         const double bps = double(r.in + r.out) * r.rate;
         std::printf("%-20s %-16s %4d %9.6g %10zu %10zu %12.0f  %s\n", r.name.c_str(), r.module.c_str(), r.rtpu,
                     r.rate, r.in, r.out, bps, e.on ? "yes" : "no");

@@ -228,7 +228,7 @@ int cmd_start(const Options& o, const StartPlan& p) {
                 failure = (n ? "RTPU " + std::to_string(n) : std::string("the host server")) + " failed to start: " + why;
                 break;
             }
-            chm_bp_status(&st);
+            (void)chm_bp_status(&st);
             const chm_bp_slot_info_t& s = st.slot[n];
             if (s.state != CHM_BP_RUNNING || s.pid != pids[std::size_t(n)]) continue;
             const int ping = chm_rtpu_ping(n, nullptr);
@@ -258,7 +258,7 @@ int cmd_start(const Options& o, const StartPlan& p) {
                         int(pids[0]), p.host_root.c_str());
         if (!p.log_terminal) std::printf("logs: %s\n", log_path(o.backplane, 1).c_str());
         std::fflush(stdout);
-        chm_bp_leave();
+        (void)chm_bp_leave();
         return 0;
     }
     // All or nothing: stop what we started, remove what we created. These
@@ -275,7 +275,7 @@ int cmd_start(const Options& o, const StartPlan& p) {
             waitpid(pid, nullptr, 0);
         }
     }
-    chm_bp_leave();
+    (void)chm_bp_leave();
     if (created) {
         unlink(o.backplane.c_str());
         for (int n = first; n <= p.rtpus; ++n) unlink(log_path(o.backplane, n).c_str());

@@ -159,7 +159,7 @@ void tasks_of(Page& pg, int slot, History* hist, History* next) {
 // One page: the table, the dead, each running RTPU's tasks.
 void render(Page& pg, const Options& o, History* hist, History* next) {
     chm_bp_status_t st;
-    chm_bp_status(&st);
+    (void)chm_bp_status(&st);
     timespec now{};
     clock_gettime(CLOCK_REALTIME, &now);
     const double age =
@@ -281,7 +281,7 @@ int cmd_status(const Options& o) {
         std::fwrite(pg.text.data(), 1, pg.text.size(), stdout);
         std::fflush(stdout);
     }
-    chm_bp_leave();
+    (void)chm_bp_leave();
     return r;
 }
 

@@ -98,12 +98,12 @@ int set(const char* name, const std::vector<const char*>& values) {
     auto* p = static_cast<unsigned char*>(chm_svar_set_local(s, name));
     for (std::size_t k = 0; k < elems; ++k)
         if (!parse_element(i.type, values[k], p, k)) {
-            chm_svar_set_destroy(s);
+            (void)chm_svar_set_destroy(s);
             say("svar set %s: element %zu \"%s\" is not a %s", name, k, values[k], kTypes[i.type]);
             return 2;
         }
     const int r = chm_svar_set_write(s);
-    chm_svar_set_destroy(s);
+    (void)chm_svar_set_destroy(s);
     return r ? fail("svar set") : 0;
 }
 
@@ -187,7 +187,7 @@ int cmd_svar(const Options& o, const std::vector<const char*>& args) {
     else if (sub == "get") r = get(rest[0]);
     else if (sub == "set") r = set(rest[0], std::vector<const char*>(rest.begin() + 1, rest.end()));
     else r = declare(rest);
-    chm_bp_leave();
+    (void)chm_bp_leave();
     return r;
 }
 

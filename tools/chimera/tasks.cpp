@@ -115,7 +115,7 @@ int cmd_load(const Options& o, const std::vector<const char*>& args) {
         }
     }
     std::fflush(stdout);
-    chm_bp_leave();
+    (void)chm_bp_leave();
     return status;
 }
 
@@ -159,7 +159,7 @@ int cmd_kill(const Options& o, const std::vector<const char*>& args) {
         }
     }
     std::fflush(stdout);
-    chm_bp_leave();
+    (void)chm_bp_leave();
     return status;
 }
 
@@ -169,11 +169,11 @@ int cmd_stop_one(const Options& o) {
     std::snprintf(word, sizeof word, "%d", o.rtpu);
     const int rtpu = resolve_rtpu(word);
     if (rtpu < 0) {
-        chm_bp_leave();
+        (void)chm_bp_leave();
         return 1;
     }
     chm_bp_status_t st;
-    chm_bp_status(&st);
+    (void)chm_bp_status(&st);
     const std::uint32_t gen = st.slot[rtpu].generation;
     const int pid = st.slot[rtpu].pid;
     const std::uint64_t start = chm::bp::proc_start_time(pid);  // pid reuse is not "alive"
@@ -184,7 +184,7 @@ int cmd_stop_one(const Options& o) {
     if (r == 0) {
         const std::uint64_t end = mono_ms() + std::uint64_t(limit * 1000);
         while (!gone && mono_ms() < end) {
-            chm_bp_status(&st);
+            (void)chm_bp_status(&st);
             const chm_bp_slot_info_t& i = st.slot[rtpu];
             gone = i.generation != gen || i.pid != pid || i.state == CHM_BP_FREE || i.state == CHM_BP_DEAD;
             if (!gone) nap_ms(10);
@@ -204,7 +204,7 @@ int cmd_stop_one(const Options& o) {
         status = refused ? 1 : 0;
     }
     std::fflush(stdout);
-    chm_bp_leave();
+    (void)chm_bp_leave();
     return status;
 }
 

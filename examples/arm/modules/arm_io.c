@@ -41,9 +41,9 @@ static const chm_module_param_t params[] = {
 };
 
 static void close_all(io_t* s) {
-    if (s->ad >= 0) chm_dev_close(s->ad); /* a safe stop: brakes on */
-    if (s->sd >= 0) chm_dev_close(s->sd);
-    if (s->fd >= 0) chm_dev_close(s->fd);
+    if (s->ad >= 0) (void)!chm_dev_close(s->ad); /* a safe stop: brakes on */
+    if (s->sd >= 0) (void)!chm_dev_close(s->sd);
+    if (s->fd >= 0) (void)!chm_dev_close(s->fd);
     s->ad = s->sd = s->fd = -1;
     if (s->registered > 1) chm_sim_unregister(FT_DEV);
     if (s->registered > 0) chm_sim_unregister(ARM_DEV);
@@ -147,7 +147,7 @@ static int kill_(chm_module_t* m) {
 static int error(chm_module_t* m, int code) {
     (void)code;
     io_t* s = chm_module_state(m);
-    if (s->ad >= 0) chm_actuator_stop(s->ad);
+    if (s->ad >= 0) (void)!chm_actuator_stop(s->ad);
     return 0;
 }
 

@@ -386,7 +386,7 @@ void take(xmail::Record* r, std::uint32_t seq, std::uint32_t index, const char* 
             void* addr = nullptr;
             std::size_t size = 0;
             if (chm_shm_attach(name, &addr, &size) != 0 || size < std::size_t(kBulkSize) * kBulkBuffers) {
-                if (addr) chm_shm_detach(addr);
+                if (addr) (void)chm_shm_detach(addr);
                 xmail::finish(r, seq, -EINVAL, nullptr, 0);
                 return;
             }

@@ -63,7 +63,7 @@ void after_fork_child() {
 }
 // A normal exit() without chm_bp_leave() still leaves cleanly (a crash
 // or _exit is a death, recovered by the survivors).
-void leave_at_exit() { chm_bp_leave(); }
+void leave_at_exit() { (void)chm_bp_leave(); }
 void register_atfork() {
     ::pthread_atfork(before_fork, after_fork_parent, after_fork_child);
     std::atexit(leave_at_exit);

@@ -52,8 +52,8 @@ void apply_pending(chm_module* m) {
 
 void cycle_task(void* arg) {
     auto* m = static_cast<chm_module*>(arg);
-    chm_err_on_task(record_cycle_error, m);
-    chm_task_on_end(on_cycle_end, m);
+    (void)chm_err_on_task(record_cycle_error, m);
+    (void)chm_task_on_end(on_cycle_end, m);
     bool first = true;
     for (;;) {
         const std::uint64_t r = chm_task_cycle_release();
@@ -68,7 +68,7 @@ void cycle_task(void* arg) {
         if (first) m->switched_at = r, first = false;
         if (m->pending_mask.load(std::memory_order_relaxed)) apply_pending(m);
         m->release_now = r;
-        chm_svar_set_read(m->set);  // -EAGAIN: an input keeps its last value
+        (void)chm_svar_set_read(m->set);  // -EAGAIN: an input keeps its last value
         const int rc = m->desc->cycle(m);
         m->release_now = 0;
         if (rc != 0 || m->missed_error.load()) {
@@ -79,7 +79,7 @@ void cycle_task(void* arg) {
             run_entry(m, kEntryError, rc ? rc : ETIME);
             return;
         }
-        chm_svar_set_write(m->set);
+        (void)chm_svar_set_write(m->set);
         ++m->cycles;
         chm_task_wait_period();
     }
@@ -92,7 +92,7 @@ void cycle_task(void* arg) {
         enter_error(m);
         return;
     }
-    chm_svar_set_release(m->set);
+    (void)chm_svar_set_release(m->set);
     m->arm_off(0);
     m->state.store(CHM_SERVO_OFF);
 }
@@ -127,7 +127,7 @@ void reap_cycle_task(chm_module* m) {
     if (m->cycle_task == CHM_TID_NONE) return;
     chm_task_status_t st;
     if (chm_task_status(m->cycle_task, &st) == 0 && st.state == CHM_TASK_ENDED) {
-        chm_task_join(m->cycle_task, CHM_NO_WAIT, nullptr);
+        (void)chm_task_join(m->cycle_task, CHM_NO_WAIT, nullptr);
         m->cycle_task = CHM_TID_NONE;
     }
 }
@@ -138,12 +138,12 @@ void stop_cycle_task(chm_module* m) {
     if (m->cycle_task == CHM_TID_NONE) return;
     m->arm_off(1);  // every release is at or after 1
     if (chm_task_join(m->cycle_task, kStopWaitNs, nullptr) == -ETIMEDOUT) {
-        chm_task_destroy(m->cycle_task);
-        chm_task_join(m->cycle_task, CHM_NO_WAIT, nullptr);
+        (void)chm_task_destroy(m->cycle_task);
+        (void)chm_task_join(m->cycle_task, CHM_NO_WAIT, nullptr);
         if (m->state.load() == CHM_SERVO_ON) run_entry(m, kEntryOff);
     }
     m->cycle_task = CHM_TID_NONE;
-    chm_svar_set_release(m->set);
+    (void)chm_svar_set_release(m->set);
     m->arm_off(0);
     if (m->state.load() == CHM_SERVO_ON) m->state.store(CHM_SERVO_OFF);
 }
@@ -258,11 +258,11 @@ int cancel(std::uint64_t at, const Item* items, std::uint32_t count, const char*
         // fault (ERROR would write safe values into variables another
         // module still writes).
         m->cycle_done = true;
-        chm_task_destroy(m->cycle_task);
-        chm_task_join(m->cycle_task, CHM_NO_WAIT, nullptr);
+        (void)chm_task_destroy(m->cycle_task);
+        (void)chm_task_join(m->cycle_task, CHM_NO_WAIT, nullptr);
         m->cycle_task = CHM_TID_NONE;
         run_entry(m, kEntryOff);
-        chm_svar_set_release(m->set);
+        (void)chm_svar_set_release(m->set);
         m->on_at = 0;
         m->state.store(CHM_SERVO_OFF);
     }
@@ -270,7 +270,7 @@ int cancel(std::uint64_t at, const Item* items, std::uint32_t count, const char*
         chm_module* m = items[i].m;
         if (items[i].on) continue;
         if (m->off_at() == at) m->arm_off(0);
-        chm_svar_set_claim(m->set, displace, n_displace);
+        (void)chm_svar_set_claim(m->set, displace, n_displace);
     }
     return 0;
 }

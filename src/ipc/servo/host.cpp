@@ -47,7 +47,7 @@ chm_err_action_t record_error(const chm_err_info_t* i, void* arg) {
 
 void entry_task(void* arg) {
     auto* c = static_cast<Call*>(arg);
-    chm_err_on_task(record_error, c->m);
+    (void)chm_err_on_task(record_error, c->m);
     const chm_module_desc_t* d = c->m->desc;
     switch (c->e) {
     case kEntryInit: c->rc = d->init(c->m); break;
@@ -61,7 +61,7 @@ void entry_task(void* arg) {
 }
 
 void unload(chm_module* m) {
-    if (m->set) chm_svar_set_destroy(m->set);
+    if (m->set) (void)chm_svar_set_destroy(m->set);
     std::free(m->state_mem);
     if (m->dl) {
         {
@@ -184,8 +184,8 @@ int run_entry(chm_module* m, Entry e, int code) {
     chm_task_status_t st;
     const int r = chm_task_join(t, kEntryTimeoutNs, &st);
     if (r == -ETIMEDOUT) {
-        chm_task_destroy(t);
-        chm_task_join(t, CHM_NO_WAIT, nullptr);
+        (void)chm_task_destroy(t);
+        (void)chm_task_join(t, CHM_NO_WAIT, nullptr);
         set_last_error(m, "%s did not return within 5 s (its task was destroyed)", entry_name(e));
         return -ECANCELED;
     }
@@ -219,7 +219,7 @@ void enter_error(chm_module* m) {
             }
         }
     }
-    chm_svar_set_write(m->set);  // -EPERM when it never claimed: nothing of it was ever out
+    (void)chm_svar_set_write(m->set);  // -EPERM when it never claimed: nothing of it was ever out
 }
 
 int spawn(const SpawnReq& q, const ParamOverride* params, const char* path, Ref* out, char* why, std::size_t n) {
@@ -322,7 +322,7 @@ int control(chm_module* m, const char* param, double value, char* why, std::size
 int clear(chm_module* m, char* why, std::size_t n) {
     if (m->state.load() != CHM_SERVO_ERROR) return std::snprintf(why, n, "%s is not in ERROR", m->name), -EALREADY;
     if (run_entry(m, kEntryClear) != 0) return std::snprintf(why, n, "clear: %s", m->last_error), -ECANCELED;
-    chm_svar_set_release(m->set);
+    (void)chm_svar_set_release(m->set);
     m->last_error[0] = 0;
     m->state.store(CHM_SERVO_OFF);
     return 0;

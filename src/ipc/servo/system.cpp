@@ -217,7 +217,7 @@ int declare_impl(chm_servo_system* s) {
 
 void kill_spawned(chm_servo_system* s) {
     for (auto& m : s->modules)
-        if (m.spawned) chm_servo_kill(m.id), m.spawned = false;
+        if (m.spawned) (void)chm_servo_kill(m.id), m.spawned = false;
 }
 
 int spawn_impl(chm_servo_system* s) {

@@ -287,7 +287,7 @@ int create_impl(const char* owner, const char* const* inputs, size_t n_in, const
     }
     // Inside a task, its claims end with it, however it ends.
     if (chm_task_self() != CHM_TID_NONE)
-        chm_task_on_end(on_task_end, reinterpret_cast<void*>(std::uintptr_t(s->id)));
+        (void)chm_task_on_end(on_task_end, reinterpret_cast<void*>(std::uintptr_t(s->id)));
     *out = s;
     return 0;
 }

@@ -58,7 +58,7 @@ int wake_bind_kernel() {
 
 void wake_unbind_kernel() {
     if (!g_bound) return;
-    chm_irq_remove(kernel::kGrantVector);
+    (void)chm_irq_remove(kernel::kGrantVector);
     port::irq_disable();
     port::doorbell_use(nullptr);
     port::irq_restore();

@@ -50,7 +50,7 @@ struct Server {
 Server g_s;
 DeferFn g_deferred[kKindEnd] = {};
 
-void on_interrupt(int, void*) { chm_sem_v(&g_s.wake); }
+void on_interrupt(int, void*) { (void)chm_sem_v(&g_s.wake); }
 
 // ------------------------------------------------------------- requests
 
@@ -267,7 +267,7 @@ void serve_all() {
 void server_main(void*) {
     for (;;) {
         serve_all();
-        chm_sem_p(&g_s.wake);
+        (void)chm_sem_p(&g_s.wake);
         while (chm_sem_try_p(&g_s.wake) == 0) {
         }  // one scan serves every ring that came meanwhile
     }
@@ -343,12 +343,12 @@ int server_start(int priority) {
     attr.priority = priority;
     attr.stack_size = 256 * 1024;  // dlopen of a program runs on it
     if (int e = chm_task_spawn(&g_s.task, server_main, nullptr, &attr)) {
-        chm_sem_destroy(&g_s.wake);
+        (void)chm_sem_destroy(&g_s.wake);
         return undo(), e;
     }
     if (int e = chm_irq_install(ipc::kVecExpressMail, on_interrupt, nullptr)) {
-        chm_task_destroy(g_s.task);
-        chm_sem_destroy(&g_s.wake);
+        (void)chm_task_destroy(g_s.task);
+        (void)chm_sem_destroy(&g_s.wake);
         return undo(), e;
     }
     g_s.started = true;
@@ -364,7 +364,7 @@ void server_stop() {
         std::uint32_t t = g_s.token;
         g_s.ring->tail.compare_exchange_strong(t, 0, Rel, R);
     }
-    chm_irq_remove(ipc::kVecExpressMail);
+    (void)chm_irq_remove(ipc::kVecExpressMail);
     g_s.started = false;
     g_s.ring = nullptr;
 }

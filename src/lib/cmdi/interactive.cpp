@@ -34,7 +34,7 @@ void session_line(chm_cmdi* c, const char* line) {
     const std::size_t last = entry.find_last_not_of(" \t");
     if (last != std::string::npos && entry[last] != '\\') entry.erase(last + 1);
     if (last != std::string::npos) {
-        chm_cmdi_history_add(c, entry.c_str());
+        (void)chm_cmdi_history_add(c, entry.c_str());
 #ifdef CHM_CMDI_LIBEDIT
         if (c->session.editing) add_history(entry.c_str());
 #endif
@@ -147,7 +147,7 @@ void chm_cmdi_destroy(chm_cmdi_t* c) {
     if (!c) return;
     if (g_session == c) {
         c->history_path.clear();  // destroy does not save
-        chm_cmdi_interactive_end(c);
+        (void)chm_cmdi_interactive_end(c);
     }
     delete c;
 }
@@ -189,7 +189,7 @@ int chm_cmdi_history_file(chm_cmdi_t* c, const char* path) {
             if (nl == std::string::npos) nl = data.size();
             const std::string line = data.substr(pos, nl - pos);
             pos = nl + 1;
-            if (line.find('\0') == std::string::npos) chm_cmdi_history_add(c, line.c_str());
+            if (line.find('\0') == std::string::npos) (void)chm_cmdi_history_add(c, line.c_str());
         }
         c->history_path = path;
         return 0;

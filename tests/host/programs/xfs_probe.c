@@ -89,7 +89,7 @@ int main(int argc, char **argv) {
         const unsigned long long ticks = g_ticks - t0, misses = misses_of(t) - m0;
         chm_xfs_stat_t st;
         int sr = chm_xfs_fstat(fd, &st);
-        chm_xfs_close(fd);
+        (void)!chm_xfs_close(fd);
         note("read bytes=%llu sum=%llu size=%llu stat=%d calls=%llu ticks=%llu misses=%llu", total, sum,
              (unsigned long long)st.size, sr, calls, ticks, misses);
         return 0;
@@ -107,7 +107,7 @@ int main(int argc, char **argv) {
         char c = 0;
         long long r = chm_xfs_read(fd, &c, 1);
         note("block read=%lld byte=%c ticks=%llu", r, c, g_ticks - t0);
-        chm_xfs_close(fd);
+        (void)!chm_xfs_close(fd);
         return 0;
     }
     if (!strcmp(what, "stdio") && argc == 4) {
@@ -141,7 +141,7 @@ int main(int argc, char **argv) {
         for (int i = 3; i < argc; ++i) {
             int fd = chm_xfs_open(argv[i], CHM_XFS_RDONLY, 0);
             note("open %s -> %d %s", argv[i], fd, fd < 0 ? chm_xfs_last_error() : "");
-            if (fd >= 0) chm_xfs_close(fd);
+            if (fd >= 0) (void)!chm_xfs_close(fd);
         }
         return 0;
     }

@@ -220,7 +220,7 @@ TEST(Heap, LockHooksBracketEveryCall) {
     void* p = chm_malloc(10);
     p = chm_realloc(p, 1000);
     chm_free(p);
-    chm_mem_check();
+    (void)chm_mem_check();
     EXPECT_EQ(g_enters.load(), 4);
     EXPECT_EQ(g_leaves.load(), 4);
     // fork() holds the heap lock across the system call: bracketed too.

@@ -37,8 +37,8 @@ static void on_shutdown(void *arg) {
 int main(int argc, char **argv) {
     if (argc < 2) return 1;
     g_file = argv[1];  /* the program's own copy of its arguments */
-    for (int s = 1; s <= CHM_USIG_MAX; ++s) chm_usig_handle(s, on_signal, NULL);
-    chm_kernel_on_shutdown(on_shutdown, NULL);
+    for (int s = 1; s <= CHM_USIG_MAX; ++s) (void)!chm_usig_handle(s, on_signal, NULL);
+    (void)!chm_kernel_on_shutdown(on_shutdown, NULL);
     note("main %d", (int)getpid());
     for (;;) chm_task_pause_until(chm_time_now() + 1000000000ull);
 }
