@@ -139,7 +139,10 @@ constexpr RowInfo kRows[] = {
     // ---- the host server (issue 19): a task on an RTPU, chimera-rtpu
     // --host-server in slot 0, both in their default configuration
     {"xfs_read_64k", "ns", "peer_pread_64k", kNull, ratio_le(2),
-     "extended file system: sequential chm_xfs_read of 64 KiB blocks by a task (>= 0.5 x pread's throughput)"},
+     "extended file system: sequential chm_xfs_read of 64 KiB blocks by a task (>= 0.5 x pread's throughput); "
+     "page-cached blocks of a file on a local disk file system are read by the task itself (preadv2 RWF_NOWAIT)"},
+    {"xfs_read_64k_server", "ns", "peer_pread_64k_tmpfs", kNull, none,
+     "the same where the direct way is refused (tmpfs): every block through the host server, read ahead"},
     {"host_call_rt", "ns", nullptr, kNull, none,
      "host procedure call round trip (chm_host_getcwd) from a task"},
     {"console_line_latency", "ns", nullptr, kNull, none,
@@ -266,6 +269,7 @@ constexpr RowInfo kRows[] = {
     {"peer_array_read", "ns", nullptr, kNull, none, "sum of a 64 KiB local array, per 8-byte word"},
     {"peer_array_write", "ns", nullptr, kNull, none, "fill of a 64 KiB local array, per 8-byte word"},
     {"peer_pread_64k", "ns", nullptr, kNull, none, "pread(2) of a 64 KiB block of a page-cached file"},
+    {"peer_pread_64k_tmpfs", "ns", nullptr, kNull, none, "pread(2) of a 64 KiB block of a file on tmpfs"},
     {"peer_memcpy_1kib", "ns", nullptr, kNull, none, "memcpy of 512 B, twice (1 KiB in all), cache-resident"},
     {"peer_memcpy_16kib", "ns", nullptr, kNull, none, "memcpy of 8 KiB, twice (16 KiB in all), cache-resident"},
     {"peer_task_cycle_cpu", "ns", nullptr, kNull, none,

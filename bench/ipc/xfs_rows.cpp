@@ -30,6 +30,7 @@
 #include <vector>
 
 #include "../harness.hpp"
+#include "chimera/err.h"
 #include "chimera/host.h"
 #include "chimera/rtpu.h"
 #include "chimera/xfs.h"
@@ -46,10 +47,13 @@ constexpr std::size_t kFile = 8 * 1024 * 1024;
 // A directory with the file, removed on every path out.
 struct Root {
     std::string dir, file;
-    Root() {
-        char buf[] = "/tmp/chimera-bench-xfs-XXXXXX";
-        if (!mkdtemp(buf)) throw std::runtime_error("mkdtemp failed");
-        dir = buf;
+    // In /tmp (a disk file system here), or `base` (/dev/shm: tmpfs).
+    explicit Root(const char* base = "/tmp") {
+        std::string tmpl = std::string(base) + "/chimera-bench-xfs-XXXXXX";
+        std::vector<char> buf(tmpl.begin(), tmpl.end());
+        buf.push_back(0);
+        if (!mkdtemp(buf.data())) throw std::runtime_error("mkdtemp failed");
+        dir = buf.data();
         file = dir + "/data.bin";
         const int fd = open(file.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0600);
         std::vector<char> block(kBlock);
@@ -91,7 +95,8 @@ struct HostSystem {
     ipcb::BackplaneFile f;
     Server server;
     ipcb::Joined me;
-    explicit HostSystem(const char* what) : f(what), server(f.path, root.dir), me(f.path, 1) {
+    explicit HostSystem(const char* what, const char* base = "/tmp")
+        : root(base), f(what), server(f.path, root.dir), me(f.path, 1) {
         ipcb::wait_rtpus_running({0});
     }
 };
@@ -156,6 +161,58 @@ void xfs_rows(Session& s) {
     s.emit("host_call_rt", where + "; chm_host_getcwd round trip", call.median, call.min, call.max);
 }
 CHM_BENCH_MEASUREMENT(xfs_rows, "xfs_read_64k", "peer_pread_64k", "host_call_rt");
+
+// The same reads where the direct way is refused (the root on tmpfs, which
+// has no RWF_NOWAIT): every block through the host server, read ahead
+// (stream.cpp). What a file the page cache does not hold costs.
+void xfs_server_rows(Session& s) {
+    Session::pin(s.cpu(0));
+    HostSystem sys("xfs-server", "/dev/shm");
+    ipcb::Kernel k(1, 0);
+    Stats xfs, peer;
+    std::function<void()> body = [&] {
+        for (int i = 0; chm_rtpu_ping(0, nullptr) != 0; ++i)
+            if (i > 500) throw std::runtime_error("host server not answering");
+        const int h = chm_xfs_open("data.bin", CHM_XFS_RDONLY, 0);
+        if (h < 0) throw std::runtime_error(std::string("chm_xfs_open: ") + chm_err_last());
+        const int fd = open(sys.root.file.c_str(), O_RDONLY);
+        std::vector<char> buf(kBlock);
+        std::size_t xfs_off = 0, pread_off = 0;
+        auto by_xfs = [&](std::uint64_t n) {
+            const std::uint64_t t0 = mono_ns();
+            for (std::uint64_t i = 0; i < n; ++i) {
+                if (xfs_off == kFile) {
+                    if (chm_xfs_lseek(h, 0, SEEK_SET) != 0) throw std::runtime_error(chm_err_last());
+                    xfs_off = 0;
+                }
+                if (chm_xfs_read(h, buf.data(), kBlock) != std::int64_t(kBlock)) throw std::runtime_error(chm_err_last());
+                xfs_off += kBlock;
+            }
+            return double(mono_ns() - t0);
+        };
+        auto by_pread = [&](std::uint64_t n) {
+            const std::uint64_t t0 = mono_ns();
+            for (std::uint64_t i = 0; i < n; ++i) {
+                if (pread_off == kFile) pread_off = 0;
+                if (pread(fd, buf.data(), kBlock, off_t(pread_off)) != ssize_t(kBlock))
+                    throw std::runtime_error("pread failed");
+                pread_off += kBlock;
+            }
+            return double(mono_ns() - t0);
+        };
+        std::tie(xfs, peer) = s.measure_interleaved(by_xfs, by_pread);
+        (void)chm_xfs_close(h);
+        close(fd);
+    };
+    k.spawn(&body, 10, "client");
+    k.run();
+    s.emit("xfs_read_64k_server", "pinned " + s.cpu_name(0) + "; as xfs_read_64k, the file on tmpfs (no RWF_NOWAIT): "
+           "every block through the host server, read ahead; peer: pread of the tmpfs file",
+           xfs.median, xfs.min, xfs.max);
+    s.emit("peer_pread_64k_tmpfs", "pread(2) of the same 64 KiB blocks of the tmpfs file", peer.median, peer.min,
+           peer.max);
+}
+CHM_BENCH_MEASUREMENT(xfs_server_rows, "xfs_read_64k_server", "peer_pread_64k_tmpfs");
 
 // A console on the host server's socket that owns RTPU 1 and records, for
 // every line "L <stamp>", the time from the stamp to its arrival.
