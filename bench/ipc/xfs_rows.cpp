@@ -7,9 +7,9 @@
 //    in turn. Target: >= 0.5 x pread's throughput (time <= 2 x).
 //  * host_call_rt: chm_host_getcwd, the smallest host procedure call: one
 //    request to the host server and its reply, round trip (no target).
-//  * console_line_latency: a task's printf of one line to its arrival at a
-//    console connected to the host server's socket (this process, a
-//    thread): the stamp the line carries against the arrival; median and
+//  * console_line_latency: a task's printf of one line to its arrival on
+//    the terminal of `chimera console` (a pseudo-terminal this process
+//    reads): the stamp the line carries against the arrival; median and
 //    range of 1,000 lines at 1 kHz (no target).
 #include <fcntl.h>
 #include <sys/stat.h>
@@ -18,6 +18,7 @@
 
 #include <sys/socket.h>
 #include <sys/un.h>
+#include <pty.h>
 
 #include <algorithm>
 #include <atomic>
@@ -35,7 +36,6 @@
 #include "chimera/rtpu.h"
 #include "chimera/xfs.h"
 #include "host/console.hpp"
-#include "host/hostio.hpp"
 #include "rtpu.hpp"
 
 namespace chm::bench {
@@ -214,53 +214,70 @@ void xfs_server_rows(Session& s) {
 }
 CHM_BENCH_MEASUREMENT(xfs_server_rows, "xfs_read_64k_server", "peer_pread_64k_tmpfs");
 
-// A console on the host server's socket that owns RTPU 1 and records, for
-// every line "L <stamp>", the time from the stamp to its arrival.
+// `chimera console --rtpus 1` on a pseudo-terminal, as an operator runs
+// it: a thread reads the terminal and records, for every line "L <stamp>"
+// it shows, the time from the stamp to its arrival on the terminal.
 struct LineClock {
-    int sock = -1;
+    int master = -1;
+    pid_t pid = -1;
+    std::string home;
     std::vector<double> ns;
     std::atomic<int> got{0};
+    std::atomic<bool> ready{false};
     std::thread reader;
     explicit LineClock(const std::string& bp) {
-        sockaddr_un a{};
-        a.sun_family = AF_UNIX;
-        const std::string path = bp + ".console";
-        std::snprintf(a.sun_path, sizeof a.sun_path, "%s", path.c_str());
-        sock = socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
-        for (int i = 0; connect(sock, reinterpret_cast<sockaddr*>(&a), sizeof a) != 0; ++i) {
-            if (i > 1000) throw std::runtime_error("cannot reach the console socket " + path);
+        char tmpl[] = "/tmp/chimera-bench-home-XXXXXX";
+        if (!mkdtemp(tmpl)) throw std::runtime_error("mkdtemp failed");
+        home = tmpl;  // its history file goes there
+        winsize ws{24, 80, 0, 0};
+        pid = forkpty(&master, nullptr, nullptr, &ws);
+        if (pid < 0) throw std::runtime_error("forkpty failed");
+        if (pid == 0) {
+            setenv("HOME", home.c_str(), 1);
+            execl(CHIMERA_BIN, CHIMERA_BIN, "console", "--backplane", bp.c_str(), "--rtpus", "1",
+                  static_cast<char*>(nullptr));
+            _exit(127);
+        }
+        reader = std::thread([this] { run(); });
+        for (int i = 0; !ready.load(std::memory_order_acquire); ++i) {
+            if (i > 5000) throw std::runtime_error("chimera console did not start");
             usleep(2000);
         }
-        const std::uint32_t mask = 1u << 1;
-        const chm::host::Frame own{chm::host::kFrameOwn, 0, 0, sizeof mask};
-        if (send(sock, &own, sizeof own, 0) != ssize_t(sizeof own) || send(sock, &mask, sizeof mask, 0) != 4)
-            throw std::runtime_error("console socket: send failed");
-        reader = std::thread([this] { run(); });
     }
     void run() {
-        chm::host::Frame f;
-        std::vector<char> data;
-        while (chm::host::recv_all(sock, &f, sizeof f) && f.len <= chm::host::kFrameMax) {
-            data.resize(f.len);
-            if (f.len && !chm::host::recv_all(sock, data.data(), f.len)) return;
+        std::string pending;
+        char buf[4096];
+        for (;;) {
+            const ssize_t k = ::read(master, buf, sizeof buf);
+            if (k <= 0) return;
             const std::uint64_t now = mono_ns();
-            if (f.type != chm::host::kFrameOut) continue;
-            for (std::uint32_t off = 0; off + sizeof(chm::host::Entry) <= f.len;) {
-                chm::host::Entry e;
-                std::memcpy(&e, data.data() + off, sizeof e);
+            pending.append(buf, std::size_t(k));
+            if (pending.find("chimera> ") != std::string::npos) ready.store(true, std::memory_order_release);
+            std::size_t nl;
+            while ((nl = pending.find('\n')) != std::string::npos) {
+                const std::size_t at = pending.find("L ");
                 unsigned long long stamp = 0;
-                if (std::sscanf(std::string(data.data() + off + sizeof e, e.len).c_str(), "L %llu", &stamp) == 1) {
+                if (at < nl && std::sscanf(pending.c_str() + at, "L %llu", &stamp) == 1) {
                     ns.push_back(double(now - stamp));
                     got.fetch_add(1, std::memory_order_release);
                 }
-                off += sizeof e + e.len;
+                pending.erase(0, nl + 1);
             }
         }
     }
     ~LineClock() {
-        shutdown(sock, SHUT_RDWR);
+        if (pid > 0) {
+            kill(pid, SIGTERM);
+            for (int i = 0; i < 500 && waitpid(pid, nullptr, WNOHANG) == 0; ++i) usleep(2000);
+            kill(pid, SIGKILL);
+            waitpid(pid, nullptr, 0);
+        }
+        if (master >= 0) close(master);  // the reader's read ends
         if (reader.joinable()) reader.join();
-        close(sock);
+        if (!home.empty()) {
+            unlink((home + "/.chimera_history").c_str());
+            rmdir(home.c_str());
+        }
     }
 };
 
@@ -293,8 +310,9 @@ void console_rows(Session& s) {
     std::sort(v.begin(), v.end());
     s.emit("console_line_latency",
            "pinned " + s.cpu_name(0) + "; a task on RTPU 1 (this process, kernel FIXED) printf of one line, "
-           "through the stdio drainer (priority 1) and chimera-rtpu --host-server (defaults) to a console on its "
-           "socket (a thread here); median of " + std::to_string(v.size()) + " lines at 1 kHz, min .. max",
+           "through the stdio drainer (priority 1), chimera-rtpu --host-server (defaults) and chimera console "
+           "--rtpus 1 to its terminal (a pseudo-terminal read here); median of " + std::to_string(v.size()) +
+           " lines at 1 kHz, min .. max",
            v[v.size() / 2], v.front(), v.back());
 }
 CHM_BENCH_MEASUREMENT(console_rows, "console_line_latency");
