@@ -39,14 +39,19 @@ constexpr std::uint32_t kServerSlot = 0;
 
 struct Direct {
     std::atomic<int> fd{-1};
-    std::uint32_t attach = 0;  // bp::attach_count() it was opened in
+    std::atomic<bool> off{false};  // the file system refused RWF_NOWAIT: kept open, unused
+    std::uint32_t attach = 0;      // bp::attach_count() it was opened in
 };
 Direct g_direct[kHandles];
 std::atomic<std::uint64_t> g_bytes{0}, g_misses{0};
 
+// Closed only with its handle (or a new attachment): another task of the
+// RTPU may be between loading the number and its preadv2, and a number
+// closed under it could name another file by then.
 void drop(Direct& d) {
     const int fd = d.fd.exchange(-1, std::memory_order_acq_rel);
     if (fd >= 0) ::close(fd);
+    d.off.store(false, std::memory_order_relaxed);
 }
 
 }  // namespace
@@ -75,7 +80,7 @@ void closed(int fd) {
 bool has(int fd) {
     if (fd < 0 || fd >= kHandles) return false;
     Direct& d = g_direct[fd];
-    if (d.fd.load(std::memory_order_acquire) < 0) return false;
+    if (d.fd.load(std::memory_order_acquire) < 0 || d.off.load(std::memory_order_relaxed)) return false;
     if (d.attach != bp::attach_count()) {  // opened on an earlier attachment: another server's handle
         drop(d);
         return false;
@@ -98,7 +103,7 @@ std::int64_t read(int fd, char* buf, std::size_t n, std::uint64_t off) {
                 stop = -EAGAIN;
                 if (!done) g_misses.fetch_add(1, std::memory_order_relaxed);
             } else {  // no RWF_NOWAIT here (ENOSYS, EOPNOTSUPP...): the server reads from now on
-                drop(g_direct[fd]);
+                g_direct[fd].off.store(true, std::memory_order_relaxed);
                 stop = -ENOTSUP;
             }
             break;
