@@ -101,6 +101,46 @@ struct HostSystem {
     }
 };
 
+// In a task: sequential chm_xfs_read of 64 KiB blocks of `file` (opened by
+// its name beneath the root, rewound at its end) interleaved with pread(2)
+// of the same blocks of the same file: *xfs and *peer.
+void measure_reads(Session& s, const std::string& file, Stats* xfs, Stats* peer) {
+    // The server answers once its express mail runs.
+    for (int i = 0; chm_rtpu_ping(0, nullptr) != 0; ++i)
+        if (i > 500) throw std::runtime_error("host server not answering");
+    const int h = chm_xfs_open("data.bin", CHM_XFS_RDONLY, 0);
+    if (h < 0) throw std::runtime_error(std::string("chm_xfs_open: ") + chm_err_last());
+    const int fd = open(file.c_str(), O_RDONLY);
+    std::vector<char> buf(kBlock);
+    std::size_t xfs_off = 0, pread_off = 0;
+    auto by_xfs = [&](std::uint64_t n) {
+        const std::uint64_t t0 = mono_ns();
+        for (std::uint64_t i = 0; i < n; ++i) {
+            if (xfs_off == kFile) {
+                if (chm_xfs_lseek(h, 0, SEEK_SET) != 0) throw std::runtime_error(chm_err_last());
+                xfs_off = 0;
+            }
+            if (chm_xfs_read(h, buf.data(), kBlock) != std::int64_t(kBlock))
+                throw std::runtime_error(std::string("chm_xfs_read: ") + chm_err_last());
+            xfs_off += kBlock;
+        }
+        return double(mono_ns() - t0);
+    };
+    auto by_pread = [&](std::uint64_t n) {
+        const std::uint64_t t0 = mono_ns();
+        for (std::uint64_t i = 0; i < n; ++i) {
+            if (pread_off == kFile) pread_off = 0;
+            if (pread(fd, buf.data(), kBlock, off_t(pread_off)) != ssize_t(kBlock))
+                throw std::runtime_error("pread failed");
+            pread_off += kBlock;
+        }
+        return double(mono_ns() - t0);
+    };
+    std::tie(*xfs, *peer) = s.measure_interleaved(by_xfs, by_pread);
+    (void)chm_xfs_close(h);
+    close(fd);
+}
+
 void xfs_rows(Session& s) {
     Session::pin(s.cpu(0));
     HostSystem sys("xfs");
@@ -108,45 +148,12 @@ void xfs_rows(Session& s) {
     ipcb::Kernel k(1, 0);
     Stats xfs, peer, call;
     std::function<void()> body = [&] {
-        // The server answers once its express mail runs.
-        for (int i = 0; chm_rtpu_ping(0, nullptr) != 0; ++i)
-            if (i > 500) throw std::runtime_error("host server not answering");
-        const int h = chm_xfs_open("data.bin", CHM_XFS_RDONLY, 0);
-        if (h < 0) throw std::runtime_error(std::string("chm_xfs_open: ") + chm_xfs_last_error());
-        const int fd = open(root.file.c_str(), O_RDONLY);
-        std::vector<char> buf(kBlock);
-        std::size_t xfs_off = 0, pread_off = 0;
-        auto by_xfs = [&](std::uint64_t n) {
-            const std::uint64_t t0 = mono_ns();
-            for (std::uint64_t i = 0; i < n; ++i) {
-                if (xfs_off == kFile) {
-                    (void)chm_xfs_lseek(h, 0, SEEK_SET);
-                    xfs_off = 0;
-                }
-                const std::int64_t r = chm_xfs_read(h, buf.data(), kBlock);
-                if (r != std::int64_t(kBlock)) throw std::runtime_error(std::string("chm_xfs_read: ") + chm_xfs_last_error());
-                xfs_off += kBlock;
-            }
-            return double(mono_ns() - t0);
-        };
-        auto by_pread = [&](std::uint64_t n) {
-            const std::uint64_t t0 = mono_ns();
-            for (std::uint64_t i = 0; i < n; ++i) {
-                if (pread_off == kFile) pread_off = 0;
-                if (pread(fd, buf.data(), kBlock, off_t(pread_off)) != ssize_t(kBlock))
-                    throw std::runtime_error("pread failed");
-                pread_off += kBlock;
-            }
-            return double(mono_ns() - t0);
-        };
-        std::tie(xfs, peer) = s.measure_interleaved(by_xfs, by_pread);
-        (void)chm_xfs_close(h);
-        close(fd);
+        measure_reads(s, root.file, &xfs, &peer);
         char cwd[64];
         call = s.measure([&](std::uint64_t n) {
             const std::uint64_t t0 = mono_ns();
             for (std::uint64_t i = 0; i < n; ++i)
-                if (chm_host_getcwd(cwd, sizeof cwd) != 0) throw std::runtime_error(chm_xfs_last_error());
+                if (chm_host_getcwd(cwd, sizeof cwd) != 0) throw std::runtime_error(chm_err_last());
             return double(mono_ns() - t0);
         });
     };
@@ -170,40 +177,7 @@ void xfs_server_rows(Session& s) {
     HostSystem sys("xfs-server", "/dev/shm");
     ipcb::Kernel k(1, 0);
     Stats xfs, peer;
-    std::function<void()> body = [&] {
-        for (int i = 0; chm_rtpu_ping(0, nullptr) != 0; ++i)
-            if (i > 500) throw std::runtime_error("host server not answering");
-        const int h = chm_xfs_open("data.bin", CHM_XFS_RDONLY, 0);
-        if (h < 0) throw std::runtime_error(std::string("chm_xfs_open: ") + chm_err_last());
-        const int fd = open(sys.root.file.c_str(), O_RDONLY);
-        std::vector<char> buf(kBlock);
-        std::size_t xfs_off = 0, pread_off = 0;
-        auto by_xfs = [&](std::uint64_t n) {
-            const std::uint64_t t0 = mono_ns();
-            for (std::uint64_t i = 0; i < n; ++i) {
-                if (xfs_off == kFile) {
-                    if (chm_xfs_lseek(h, 0, SEEK_SET) != 0) throw std::runtime_error(chm_err_last());
-                    xfs_off = 0;
-                }
-                if (chm_xfs_read(h, buf.data(), kBlock) != std::int64_t(kBlock)) throw std::runtime_error(chm_err_last());
-                xfs_off += kBlock;
-            }
-            return double(mono_ns() - t0);
-        };
-        auto by_pread = [&](std::uint64_t n) {
-            const std::uint64_t t0 = mono_ns();
-            for (std::uint64_t i = 0; i < n; ++i) {
-                if (pread_off == kFile) pread_off = 0;
-                if (pread(fd, buf.data(), kBlock, off_t(pread_off)) != ssize_t(kBlock))
-                    throw std::runtime_error("pread failed");
-                pread_off += kBlock;
-            }
-            return double(mono_ns() - t0);
-        };
-        std::tie(xfs, peer) = s.measure_interleaved(by_xfs, by_pread);
-        (void)chm_xfs_close(h);
-        close(fd);
-    };
+    std::function<void()> body = [&] { measure_reads(s, sys.root.file, &xfs, &peer); };
     k.spawn(&body, 10, "client");
     k.run();
     s.emit("xfs_read_64k_server", "pinned " + s.cpu_name(0) + "; as xfs_read_64k, the file on tmpfs (no RWF_NOWAIT): "
