@@ -10,8 +10,10 @@ namespace chm::host::console {
 // express-mail server: route the tasks' stdout, stderr and stdin through
 // the host server, with a drainer task of `priority`. Errors: -EBUSY
 // started; -EMSGSIZE ring records too small for a line; -ENOMEM;
-// chm_task_spawn's errors.
-int start(int priority);
+// chm_task_spawn's errors. `drop_orphans`: lines no console owns (the
+// host server answers -ENOTCONN) are dropped instead of written to the
+// log; with no host server at all they go to the log either way.
+int start(int priority, bool drop_orphans = false);
 // After chm_kernel_run: what is still queued goes to the log; stdio is
 // the process's own again.
 void stop();

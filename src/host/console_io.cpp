@@ -51,7 +51,8 @@ struct State {
     std::uint32_t head = 0, tail = 0;  // byte counters (mod kQueueBytes)
     chm_sem_t ready;               // V per entry queued
     chm_tid_t drainer = CHM_TID_NONE;
-    std::uint32_t dropped = 0;     // lines written to the log instead
+    std::uint32_t dropped = 0;     // lines written to the log (or dropped) instead
+    bool drop_orphans = false;     // no console owns this RTPU: drop, not log
 };
 State g;
 
@@ -198,7 +199,10 @@ void drain(void*) {
             if (!n) break;
             HostRequest h{};
             h.op = kOut;
-            if (request(h, batch, n, nullptr, 0, nullptr, "console output", 0) < 0) {
+            const int r = request(h, batch, n, nullptr, 0, nullptr, "console output", 0);
+            if (r == -ENOTCONN && g.drop_orphans) {
+                g.dropped += 1;  // no console owns this RTPU, and its output is not kept
+            } else if (r < 0) {
                 // No host server, or no console owns this RTPU: the lines
                 // go to the log, none lost.
                 for (std::uint32_t off = 0; off + sizeof(Entry) <= n;) {
@@ -217,8 +221,9 @@ void drain(void*) {
 
 }  // namespace
 
-int start(int priority) {
+int start(int priority, bool drop_orphans) {
     if (g.started) return -EBUSY;
+    g.drop_orphans = drop_orphans;
     if (inline_room() < sizeof(Entry) + kLineMax) return -EMSGSIZE;
     if (int e = chm_sem_init(&g.ready, CHM_SEM_COUNTING, 0, 0)) return e;
     for (int fd = 0; fd < 3; ++fd) g.log_fd[fd] = ::fcntl(fd, F_DUPFD_CLOEXEC, 10);

@@ -22,8 +22,10 @@ namespace {
 
 class ConsoleTest : public RtpuTest {
 protected:
-    void start_system(int rtpus) {
-        Outcome r = chimera({"start", "--rtpus", std::to_string(rtpus), "--host-root", dir_});
+    void start_system(int rtpus, const std::vector<std::string>& extra = {}) {
+        std::vector<std::string> args = {"start", "--rtpus", std::to_string(rtpus), "--host-root", dir_};
+        args.insert(args.end(), extra.begin(), extra.end());
+        Outcome r = chimera(args);
         ASSERT_EQ(r.status, 0) << r.err << r.out;
         ASSERT_EQ(chm_bp_attach_host(bp_.c_str(), "test", nullptr), 0) << chm_bp_last_error();
     }
@@ -171,6 +173,34 @@ TEST_F(ConsoleTest, LinesUnderWayWhenTheRtpuStopsReachItsLog) {
     const std::string log = read_file(bp_ + ".rtpu1.log");
     EXPECT_NE(log.find("frozen task 0 line 2 of 3"), std::string::npos) << log;
     EXPECT_NE(log.find("frozen task 0 finished"), std::string::npos) << log;
+}
+
+// --orphan-output drop: lines no console owns are dropped, not logged, and
+// the printing tasks never wait; a console that comes later gets the lines
+// printed from then on.
+TEST_F(ConsoleTest, OrphanOutputDroppedAsConfigured) {
+    ASSERT_NO_FATAL_FAILURE(start_system(1, {"--orphan-output", "drop"}));
+    Outcome r = chimera({"load", "1", PRINTER_SO, "2", "300", "orphan"});
+    ASSERT_EQ(r.status, 0) << r.err << r.out;
+    // Both printers end (nothing blocks them): the RTPU has only its own
+    // tasks left within a bounded time.
+    bool ended = false;
+    for (int i = 0; i < 200 && !ended; ++i) {
+        Outcome t = chimera({"status"});
+        ended = t.status == 0 && t.out.find("printer") == std::string::npos;
+        if (!ended) nap_ms(50);
+    }
+    EXPECT_TRUE(ended) << "the printers did not end with no console to print to";
+    EXPECT_EQ(read_file(bp_ + ".rtpu1.log").find("orphan task"), std::string::npos) << "dropped lines were logged";
+    Pty t;
+    ASSERT_NO_FATAL_FAILURE(open_console(t));
+    t.type("load 1 " + std::string(PRINTER_SO) + " 1 2 owned\r");
+    ASSERT_TRUE(t.read_until("[1] owned task 0 finished")) << t.seen;
+    t.type("quit\r");
+    EXPECT_EQ(t.wait_exit(), 0) << t.seen;
+    Outcome bad = chimera({"start", "--rtpus", "1", "--orphan-output", "keep"}, true);
+    EXPECT_NE(bad.status, 0);
+    EXPECT_NE(bad.err.find("log or drop"), std::string::npos) << bad.err;
 }
 
 TEST_F(ConsoleTest, EightTasksOnThreeRtpusPrint100000WholeLines) {

@@ -71,6 +71,8 @@ void usage(FILE* f) {
         "                  (the log); by default they go line by line through the\n"
         "                  host server to the console that owns this RTPU, and\n"
         "                  stdin reads come from that console\n"
+        "--orphan-output log|drop  what becomes of tasks' lines while no console\n"
+        "                  owns this RTPU: written to the log (default) or dropped\n"
         "--programs DIR    load programs (here and by express mail) only from under\n"
         "                  DIR (any number); without it, only files that no one but\n"
         "                  you or root can change (SECURITY.md)\n"
@@ -97,6 +99,7 @@ struct Options {
     const char* host_root = nullptr;        // --host-server: serve the host from slot 0
     bool allow_shell = false;               // --host-allow-shell
     bool console_stdio = true;              // --stdio-log: false
+    bool drop_orphans = false;              // --orphan-output drop
 };
 
 [[noreturn]] void bad(const char* fmt, const char* arg) {
@@ -169,6 +172,10 @@ Options parse(int argc, char** argv) {
             o.allow_shell = true;
         } else if (!std::strcmp(a, "--stdio-log")) {
             o.console_stdio = false;
+        } else if (!std::strcmp(a, "--orphan-output")) {
+            const char* v = value(a);
+            if (std::strcmp(v, "log") && std::strcmp(v, "drop")) bad("--orphan-output \"%s\": log or drop", v);
+            o.drop_orphans = !std::strcmp(v, "drop");
         } else if (!std::strcmp(a, "--")) {
             ++i;
             break;
@@ -355,7 +362,7 @@ int main(int argc, char** argv) {
     // Tasks' stdio through the host server to the console (to the log when
     // no host server answers); the host server's own goes to its log.
     if (!o.host_root && o.console_stdio) {
-        if (int r = chm::host::console::start(kStdioPriority)) {
+        if (int r = chm::host::console::start(kStdioPriority, o.drop_orphans)) {
             if (r != -EMSGSIZE) return fail("cannot route stdio to the console", r);
             std::fprintf(stderr, "chimera-rtpu: RTPU %d: warning: ring records too small for a line: tasks' "
                          "stdio stays in this log\n", o.rtpu);

@@ -45,7 +45,8 @@ void usage(FILE* f) {
     std::fprintf(f,
         "usage: chimera start   [--backplane PATH] [--rtpus N] [--program RTPU:PATH[:ARG...]]...\n"
         "                       [--policy muf|rm|edf|mlf|fixed] [--rt-priority P] [--pin]\n"
-        "                       [--lock-memory] [--idle-poll US] [--log-terminal] [--timeout S]\n"
+        "                       [--lock-memory] [--idle-poll US] [--orphan-output log|drop]\n"
+        "                       [--log-terminal] [--timeout S]\n"
         "                       [--group NAME] [--programs DIR]... [--host-root DIR]\n"
         "                       [--no-host-server] [--host-allow-shell]\n"
         "       chimera status  [--backplane PATH] [--watch [--interval S] [--count N | --once]]\n"
@@ -67,7 +68,9 @@ void usage(FILE* f) {
         "        --log-terminal). An existing backplane is validated first, and a\n"
         "        system already running on it is refused (nothing started, no log\n"
         "        touched). Waits up to S seconds (default 10) until every RTPU runs\n"
-        "        and answers. --rt-priority, --lock-memory and --idle-poll go to every\n"
+        "        and answers. --rt-priority, --lock-memory, --idle-poll and\n"
+        "        --orphan-output log|drop (tasks' lines while no console owns their\n"
+        "        RTPU: to its log, the default, or dropped) go to every\n"
         "        RTPU (see chimera-rtpu --help); --pin runs RTPU n on the n-th allowed\n"
         "        CPU (round robin). --group NAME makes a new backplane mode 0660 for\n"
         "        that group, whose members may then attach; --programs DIR (any\n"
@@ -225,6 +228,11 @@ int main(int argc, char** argv) {
             plan.rtpu_options.insert(plan.rtpu_options.end(), {a, v});
         } else if (a == "--lock-memory" && starting) {
             plan.rtpu_options.push_back(a);
+        } else if (a == "--orphan-output" && starting) {
+            const char* v = value();
+            if (std::string(v) != "log" && std::string(v) != "drop")
+                bad("--orphan-output wants log or drop, not \"" + std::string(v) + "\"");
+            plan.rtpu_options.insert(plan.rtpu_options.end(), {a, v});
         } else if (a == "--pin" && starting) {
             plan.pin = true;
         } else if (a == "--group" && starting) {
