@@ -91,8 +91,9 @@ CHM_CHECK int chm_kernel_run(void);
  * first), then chm_kernel_run returns `code`. Task context. Does not return
  * to the caller. The hooks run in the caller's context while the other
  * tasks go on running, so a hook may block briefly: pause, or wait for a
- * task to finish its cycle so that the counts it prints are final. A
- * second call while the hooks run only suspends its caller. */
+ * task to finish its cycle so that the counts it prints are final (a hook
+ * that never returns holds the stop). A second call while the hooks run
+ * only suspends its caller; called from a hook, it returns at once. */
 void chm_kernel_stop(int code);
 
 /* Register a hook run by chm_kernel_stop (actuators first: register them

@@ -194,6 +194,7 @@ struct Kernel {
     bool initialised = false;
     bool running = false;
     bool stop_requested = false;  // chm_kernel_stop called: hooks running
+    struct Tcb* hooks_runner = nullptr;  // the task running the shutdown hooks
     bool stopping = false;        // hooks done: the run loop returns
     // A task spun out idle_poll_ns before it parked (sync/remote_wait.cpp):
     // the idle loop sleeps without polling again.

@@ -281,6 +281,24 @@ TEST_F(Sync, ShutdownHookMayBlockWhileTheOtherTasksRun) {
     EXPECT_EQ(chm_time_now(), 8 * kMs);
 }
 
+// A hook that calls chm_kernel_stop itself (a handler it triggers asks to
+// stop the RTPU): the call returns at once, the stop goes on.
+bool g_second_hook_ran = false;
+void stopping_hook(void*) {
+    chm_kernel_stop(9);
+    g_second_hook_ran = true;
+}
+void stop_now(void*) { chm_kernel_stop(7); }
+
+TEST_F(Sync, AStopFromAShutdownHookReturnsAndTheStopGoesOn) {
+    start(CHM_SCHED_FIXED);
+    g_second_hook_ran = false;
+    ASSERT_EQ(chm_kernel_on_shutdown(stopping_hook, nullptr), 0);
+    spawn(stop_now, nullptr, "stopper", 5);
+    EXPECT_EQ(chm_kernel_run(), 7) << "the first stop's code; not a hang (-EDEADLK on the virtual clock)";
+    EXPECT_TRUE(g_second_hook_ran);
+}
+
 // ---- CPU lock
 void locked_low(void*) {
     chm_task_lock();

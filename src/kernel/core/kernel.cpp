@@ -152,9 +152,14 @@ int chm_kernel_run(void) {
 
 void chm_kernel_stop(int code) {
     port::irq_disable();
+    if (g_k.stop_requested && !g_k.stopping && g_k.current && g_k.current == g_k.hooks_runner) {
+        port::irq_restore();  // from a shutdown hook: the stop is under way already
+        return;
+    }
     if (!g_k.stop_requested) {
         g_k.stop_requested = true;
         g_k.stop_code = code;
+        g_k.hooks_runner = g_k.current;
         port::irq_restore();
         // In the caller's context, the other tasks still running: a hook
         // may block (pause, wait for a task to finish its cycle). The run
