@@ -34,8 +34,7 @@ namespace chm::host::direct {
 namespace {
 
 constexpr std::size_t kChunk = 64 * 1024;
-constexpr int kHandles = CHM_XFS_OPEN_MAX * 4;  // the server's handle numbers
-constexpr std::uint32_t kServerSlot = 0;
+constexpr int kHandles = kHandleMax;  // the server's handle numbers
 
 struct Direct {
     std::atomic<int> fd{-1};

@@ -18,6 +18,8 @@
 
 #include <sys/socket.h>
 
+#include "chimera/xfs.h"
+
 namespace chm::host {
 
 enum Op : std::uint32_t {
@@ -118,6 +120,9 @@ inline bool recv_all(int fd, void* buf, std::size_t n) {
 inline constexpr std::uint32_t kBulkSize = 256 * 1024;
 inline constexpr std::uint32_t kBulkBuffers = 4;
 inline constexpr int kServerSlot = 0;
+// Handle numbers the host server gives: indexes of its table, 0..kHandleMax-1
+// (CHM_XFS_OPEN_MAX per client process).
+inline constexpr int kHandleMax = CHM_XFS_OPEN_MAX * 4;
 
 // The transfer segment of the process in backplane slot `slot`.
 inline void bulk_name(char* out, std::size_t n, std::uint32_t slot) {

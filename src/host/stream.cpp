@@ -35,7 +35,7 @@ namespace {
 
 constexpr int kDepth = int(kBulkBuffers) - 1;  // one buffer stays for other transfers
 constexpr int kStreams = 4;
-constexpr int kHandles = CHM_XFS_OPEN_MAX * 4;  // the server's handle numbers
+constexpr int kHandles = kHandleMax;  // the server's handle numbers
 
 struct Block {
     xmail::Pending p;

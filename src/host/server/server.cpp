@@ -59,7 +59,7 @@ struct State {
     std::atomic<int> working{0};          // workers not yet returned
     std::vector<char> task_rep;           // the server task's reply buffer
     Client clients[CHM_BP_MAX_SLOTS];
-    Handle handles[CHM_XFS_OPEN_MAX * 4];
+    Handle handles[kHandleMax];
 };
 State* g = nullptr;
 

@@ -38,12 +38,10 @@ LastError& here() {
 
 void err_last_set(const char* text) {
     LastError& l = here();
-    if (text != l.text) {
-        std::size_t n = std::strlen(text);
-        if (n >= sizeof l.text) n = sizeof l.text - 1;
-        std::memmove(l.text, text, n);
-        l.text[n] = 0;
-    }
+    std::size_t n = std::strlen(text);
+    if (n >= sizeof l.text) n = sizeof l.text - 1;
+    std::memmove(l.text, text, n);  // text may be l.text itself
+    l.text[n] = 0;
     l.fresh = true;
     l.call = nullptr;
 }

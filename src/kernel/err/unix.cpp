@@ -102,28 +102,14 @@ void* chm_unix_malloc(size_t size) {
     return p;
 }
 
-// The names before API 1.0, kept for one release (CHANGELOG.md).
-int chm_open(const char* path, int flags, ...) {
-    mode_t mode = 0;
-    if (flags & (O_CREAT | O_TMPFILE)) {
-        va_list ap;
-        va_start(ap, flags);
-        mode = mode_t(va_arg(ap, unsigned));
-        va_end(ap);
-    }
-    return chm_unix_open(path, flags, mode);
-}
-int chm_close(int fd) { return chm_unix_close(fd); }
-ssize_t chm_read(int fd, void* buf, size_t n) { return chm_unix_read(fd, buf, n); }
-ssize_t chm_write(int fd, const void* buf, size_t n) { return chm_unix_write(fd, buf, n); }
-off_t chm_lseek(int fd, off_t off, int whence) { return chm_unix_lseek(fd, off, whence); }
-int chm_ioctl(int fd, unsigned long request, ...) {
-    va_list ap;
-    va_start(ap, request);
-    void* arg = va_arg(ap, void*);
-    va_end(ap);
-    return chm_unix_ioctl(fd, request, arg);
-}
-void* chm_malloc_checked(size_t size) { return chm_unix_malloc(size); }
+// The names before API 1.0, kept for one release (CHANGELOG.md): the same
+// functions under a second symbol.
+int chm_open(const char* path, int flags, ...) __attribute__((alias("chm_unix_open")));
+int chm_close(int fd) __attribute__((alias("chm_unix_close")));
+ssize_t chm_read(int fd, void* buf, size_t n) __attribute__((alias("chm_unix_read")));
+ssize_t chm_write(int fd, const void* buf, size_t n) __attribute__((alias("chm_unix_write")));
+off_t chm_lseek(int fd, off_t off, int whence) __attribute__((alias("chm_unix_lseek")));
+int chm_ioctl(int fd, unsigned long request, ...) __attribute__((alias("chm_unix_ioctl")));
+void* chm_malloc_checked(size_t size) __attribute__((alias("chm_unix_malloc")));
 
 }  // extern "C"
