@@ -1,29 +1,16 @@
-/* The pick-and-place demo's host programs (job.c, monitor.c): the module
- * instances, their RTPUs and rates, and the phases. */
+/* The pick-and-place demo's host programs (job.c, monitor.c): the modules
+ * the phases switch, and the phases. */
 #ifndef ARM_DEMO_HOST_H
 #define ARM_DEMO_HOST_H
 
 #include "arm.h"
 
+/* The modules the phases switch, by their names in system.toml (which
+ * also says where and how fast each runs). */
 enum { M_IO, M_GRAVITY, M_PD, M_TRAJ, M_FORCE, M_GRIPPER, M_COUNT };
-
-typedef struct {
-    const char* name;  /* instance name = the module's file name without .so */
-    int rtpu;
-    int period_mult;   /* period = period_mult x the base period */
-    int critical;      /* its deadlines count in the outcome */
-    int priority;
-} demo_module_t;
-
-/* Sensing first on RTPU 1 (highest priority), free-motion control beside
- * it; the trajectory, force control and the gripper on RTPU 2. */
-static const demo_module_t demo_modules[M_COUNT] = {
-    [M_IO] = {"arm_io", 1, 1, 1, 30},
-    [M_GRAVITY] = {"gravity", 1, 1, 1, 20},
-    [M_PD] = {"joint_pd", 1, 1, 1, 10},
-    [M_TRAJ] = {"traj", 2, 1, 1, 20},
-    [M_FORCE] = {"force_ctl", 2, 1, 1, 10},
-    [M_GRIPPER] = {"gripper", 2, 5, 0, 5},
+static const char* const demo_module_names[M_COUNT] = {
+    [M_IO] = "arm_io",   [M_GRAVITY] = "gravity",  [M_PD] = "joint_pd",
+    [M_TRAJ] = "traj",   [M_FORCE] = "force_ctl",  [M_GRIPPER] = "gripper",
 };
 
 enum { PH_START = 1, PH_APPROACH, PH_PICK, PH_MOVE, PH_PLACE, PH_RETREAT, PH_STOP };

@@ -1,8 +1,9 @@
 #!/bin/sh
 # `make demo`: the pick-and-place arm on the default backplane
 # ($CHIMERA_BACKPLANE, else `chimera path`). Two RTPUs are started empty;
-# the job program (chimera-arm-job, a host process) takes control of them,
-# spawns the control modules and switches them live per phase while
+# the job program (chimera-arm-job, a host process) reads the system's
+# layout (system.toml: variables, modules, RTPUs, rates), takes control of
+# the RTPUs, spawns the control modules and switches them live per phase while
 # chimera-arm-monitor prints the figures once a second; then the monitor's
 # samples become a PNG plot (plot.py, python3-matplotlib), `chimera stop`
 # and `chimera rm`. Ctrl-C stops and cleans up too. The simulated arm's
@@ -11,7 +12,7 @@
 # and no critical deadline was missed (the job says which failed).
 #   DEMO_PLOT       where the plot goes (default: arm-demo.png here)
 #   DEMO_TOLERANCE  placement tolerance in m (default 0.015)
-#   DEMO_PERIOD_MS  the modules' base period (default 2; the gripper runs at 5x)
+#   DEMO_SYSTEM     the system file (default: the built system.toml, beside the modules)
 #   DEMO_RTPU_OPTIONS  as for the loop demo (default: SCHED_FIFO 50 when allowed)
 #
 # usage: demo.sh [BUILD_DIR]   (default: build)
@@ -23,7 +24,7 @@ HERE=$(dirname "$0")
 PLOT=${DEMO_PLOT:-arm-demo.png}
 . "$HERE/../demo-lib.sh"
 demo_need "$CHIMERA" "$BUILD/tools/chimera-rtpu/chimera-rtpu" "$ARM/chimera-arm-job" "$ARM/chimera-arm-monitor" \
-    "$ARM/arm_io.so" "$ARM/traj.so" "$ARM/gravity.so" "$ARM/joint_pd.so" "$ARM/force_ctl.so" "$ARM/gripper.so"
+    "$ARM/system.toml" "$ARM/arm_io.so" "$ARM/traj.so" "$ARM/gravity.so" "$ARM/joint_pd.so" "$ARM/force_ctl.so" "$ARM/gripper.so"
 BP=$("$CHIMERA" path) || exit 1
 RTPUS=2
 demo_begin
@@ -57,9 +58,10 @@ demo_logs
 
 echo
 echo "== chimera-arm-monitor (figures once a second) and chimera-arm-job (the phases and switches)"
-"$ARM/chimera-arm-monitor" --seconds 90 --csv "$CSV" &
+SYSTEM=${DEMO_SYSTEM:-$ARM/system.toml}
+"$ARM/chimera-arm-monitor" --system "$SYSTEM" --seconds 90 --csv "$CSV" &
 monitor_pid=$!
-"$ARM/chimera-arm-job" --modules "$ARM" --tolerance "${DEMO_TOLERANCE:-0.015}" --period-ms "${DEMO_PERIOD_MS:-2}"
+"$ARM/chimera-arm-job" --system "$SYSTEM" --tolerance "${DEMO_TOLERANCE:-0.015}"
 job_rc=$?
 # The monitor ends when the job publishes its end; a job that failed
 # before it could must not leave the monitor waiting: 3 s, then it goes.

@@ -1,7 +1,8 @@
 /* chimera-arm-job: the pick-and-place demo's job program, a host process.
- * It declares the state variables, takes control of RTPUs 1 and 2, spawns
- * the modules (demo.h) and runs the phases, switching the module set live
- * at one cycle boundary each time:
+ * It reads the system's layout (system.toml: the state variables, which
+ * module runs on which RTPU at what rate), declares the variables, takes
+ * control of the RTPUs the file names, spawns the modules and runs the
+ * phases, switching the module set live at one cycle boundary each time:
  *   start     on: arm_io gravity traj joint_pd gripper (jaws open)
  *   approach  free motion to 8 cm above the object
  *   pick      joint_pd -> force_ctl: press on the object with 5 N; close
@@ -13,6 +14,7 @@
  * tolerance of its target and no critical module missed a deadline. Exit
  * status 0 when both hold, 1 otherwise (the reason printed), 2 bad usage. */
 #include <chimera/bp.h>
+#include <chimera/err.h>
 #include <chimera/servo.h>
 #include <chimera/svar.h>
 #include <errno.h>
@@ -25,9 +27,9 @@
 
 #include "demo.h"
 
-static chm_servo_module_t g_mod[M_COUNT];
-static int g_spawned[M_COUNT];
-static uint64_t g_period_ns = 2000000;
+static chm_servo_system_t* g_sys;
+static chm_servo_module_t g_mod[M_COUNT]; /* the phases' modules, by demo.h index */
+static uint64_t g_period_ns;              /* the fastest module's: a switch's cost is in its cycles */
 static double g_timeout_s = 60;
 static uint64_t g_deadline_ns; /* the whole job's */
 static chm_svar_set_t* g_set;
@@ -63,28 +65,34 @@ static void set_phase(int p) {
     fflush(stdout);
 }
 
+/* Module i of the system file, when spawned. */
+static int entry(size_t i, chm_servo_system_entry_t* e) {
+    return chm_servo_system_module_at(g_sys, i, e) == 0 && e->spawned;
+}
+
 /* Every module's misses (critical ones only when `critical_only`). */
 static uint64_t misses(int critical_only) {
     uint64_t n = 0;
-    for (int i = 0; i < M_COUNT; ++i) {
+    chm_servo_system_entry_t e;
+    for (size_t i = 0; i < chm_servo_system_modules(g_sys); ++i) {
         chm_servo_status_t st;
-        if (g_spawned[i] && (!critical_only || demo_modules[i].critical) && chm_servo_status(g_mod[i], &st) == 0)
-            n += st.misses;
+        if (entry(i, &e) && (!critical_only || e.critical) && chm_servo_status(e.id, &st) == 0) n += st.misses;
     }
     return n;
 }
 
 /* 0 while every spawned module is OFF or ON; else prints which is not. */
 static int modules_ok(void) {
-    for (int i = 0; i < M_COUNT; ++i) {
+    chm_servo_system_entry_t e;
+    for (size_t i = 0; i < chm_servo_system_modules(g_sys); ++i) {
         chm_servo_status_t st;
-        if (!g_spawned[i]) continue;
-        if (chm_servo_status(g_mod[i], &st) != 0) {
-            fprintf(stderr, "job: status of %s: %s\n", demo_modules[i].name, chm_servo_last_error());
+        if (!entry(i, &e)) continue;
+        if (chm_servo_status(e.id, &st) != 0) {
+            fprintf(stderr, "job: status of %s: %s\n", e.name, chm_err_last());
             return -1;
         }
         if (st.state == CHM_SERVO_ERROR || st.state == CHM_SERVO_DEAD) {
-            fprintf(stderr, "job: module %s on RTPU %d is %s: %s\n", demo_modules[i].name, demo_modules[i].rtpu,
+            fprintf(stderr, "job: module %s on RTPU %d is %s: %s\n", e.name, e.rtpu,
                     st.state == CHM_SERVO_DEAD ? "DEAD (its RTPU is gone)" : "in ERROR",
                     st.last_error[0] ? st.last_error : "no message");
             return -1;
@@ -93,22 +101,11 @@ static int modules_ok(void) {
     return 0;
 }
 
-/* Switch `off` -> `on` (module indices, -1 ends each list) at one boundary
- * and record its instant and cost for the monitor. */
-static int do_switch(const int* off, const int* on) {
-    chm_servo_module_t o[M_COUNT], n[M_COUNT];
-    size_t no = 0, nn = 0;
-    for (; *off >= 0; ++off) o[no++] = g_mod[*off];
-    for (; *on >= 0; ++on) n[nn++] = g_mod[*on];
-    const uint64_t before = misses(0), t_req = now_ns();
-    uint64_t at = 0;
-    const int r = chm_servo_switch(o, no, n, nn, 0, &at);
-    if (r != 0) {
-        fprintf(stderr, "job: switch %d refused (%s): %s\n", g_nsw + 1, strerror(-r), chm_servo_last_error());
-        return -1;
-    }
-    /* Its cost: how many cycles of the base period it took to take effect,
-     * and the deadlines missed around it (read 5 cycles after T). */
+/* A switch requested at t_req took effect at `at`: wait 5 cycles, then
+ * record its instant and cost for the monitor: how many cycles of the base
+ * period it took to take effect, and the deadlines missed around it (the
+ * count was `before` at the request). */
+static void switched(uint64_t t_req, uint64_t at, uint64_t before) {
     while (now_ns() < at + 5 * g_period_ns) nap_ms(1);
     const double cost = (double)(at - t_req) / (double)g_period_ns;
     const uint64_t missed = misses(0) - before;
@@ -124,12 +121,40 @@ static int do_switch(const int* off, const int* on) {
     printf("job: switch %d (%s) effective at T = %.6f s, %.1f cycles after the request, %llu cycles missed\n",
            g_nsw, demo_phase_name(*g_phase), (double)at * 1e-9, cost, (unsigned long long)missed);
     fflush(stdout);
+}
+
+/* Switch `off` -> `on` (module indices, -1 ends each list) at one boundary. */
+static int do_switch(const int* off, const int* on) {
+    chm_servo_module_t o[M_COUNT], n[M_COUNT];
+    size_t no = 0, nn = 0;
+    for (; *off >= 0; ++off) o[no++] = g_mod[*off];
+    for (; *on >= 0; ++on) n[nn++] = g_mod[*on];
+    const uint64_t before = misses(0), t_req = now_ns();
+    uint64_t at = 0;
+    const int r = chm_servo_switch(o, no, n, nn, 0, &at);
+    if (r != 0) {
+        fprintf(stderr, "job: switch %d refused (%s): %s\n", g_nsw + 1, strerror(-r), chm_err_last());
+        return -1;
+    }
+    switched(t_req, at, before);
+    return 0;
+}
+
+/* Switch on every module the file marks `on`, in one switch. */
+static int start_system(void) {
+    const uint64_t before = misses(0), t_req = now_ns();
+    uint64_t at = 0;
+    if (chm_servo_system_start(g_sys, &at) != 0) {
+        fprintf(stderr, "job: start: %s\n", chm_err_last());
+        return -1;
+    }
+    switched(t_req, at, before);
     return 0;
 }
 
 static int control(int m, const char* param, double v) {
     const int r = chm_servo_control(g_mod[m], param, v);
-    if (r != 0) fprintf(stderr, "job: %s.%s = %g: %s\n", demo_modules[m].name, param, v, chm_servo_last_error());
+    if (r != 0) fprintf(stderr, "job: %s.%s = %g: %s\n", demo_module_names[m], param, v, chm_err_last());
     return r;
 }
 
@@ -169,52 +194,48 @@ static int pressing(void) { return fabs(get1(SV_F, 1) - 5.0) < 1.0; }
 static int holding(void) { return get1(SV_OBJ, 2) == 1 && get1(SV_GRIP, 1) >= 8.0; }
 static int released(void) { return get1(SV_OBJ, 2) == 0 && get1(SV_GRIP, 0) >= 0.07; }
 
-static int declare(const char* name, chm_svar_type_t t, uint32_t rows, uint32_t cols, const char* unit) {
-    const chm_svar_decl_t d = {name, t, rows, cols, unit};
-    const int r = chm_svar_declare(&d);
-    if (r != 0) fprintf(stderr, "job: declare %s: %s\n", name, chm_bp_last_error());
-    return r;
-}
-
-static int spawn_all(const char* dir) {
-    for (int i = 0; i < M_COUNT; ++i) {
-        char path[CHM_SERVO_PATH_MAX];
-        if (snprintf(path, sizeof path, "%s/%s.so", dir, demo_modules[i].name) >= (int)sizeof path) {
-            fprintf(stderr, "job: module directory too long\n");
-            return -1;
-        }
-        chm_servo_spawn_t s;
-        chm_servo_spawn_init(&s);
-        s.rtpu = demo_modules[i].rtpu;
-        s.path = path;
-        s.name = demo_modules[i].name;
-        s.period_ns = g_period_ns * (uint64_t)demo_modules[i].period_mult;
-        s.critical = demo_modules[i].critical;
-        s.priority = demo_modules[i].priority;
-        s.wcet_ns = 100000;
-        if (chm_servo_spawn(&s, &g_mod[i]) != 0) {
-            fprintf(stderr, "job: spawn %s on RTPU %d: %s\n", path, s.rtpu, chm_servo_last_error());
-            return -1;
-        }
-        g_spawned[i] = 1;
+/* Read the system file, declare its variables, spawn its modules OFF and
+ * find the ones the phases switch. */
+static int set_up(const char* path) {
+    if (chm_servo_system_open(path, &g_sys) != 0) {
+        fprintf(stderr, "job: %s\n", chm_err_last());
+        return -1;
     }
+    chm_servo_system_entry_t e;
+    for (size_t i = 0; i < chm_servo_system_modules(g_sys); ++i)
+        if (chm_servo_system_module_at(g_sys, i, &e) == 0 && (!g_period_ns || e.period_ns < g_period_ns))
+            g_period_ns = e.period_ns;
+    if (chm_servo_system_declare(g_sys) != 0 || chm_servo_system_spawn(g_sys) != 0) {
+        fprintf(stderr, "job: %s\n", chm_err_last());
+        return -1;
+    }
+    for (int m = 0; m < M_COUNT; ++m)
+        if (chm_servo_system_find(g_sys, demo_module_names[m], &g_mod[m]) != 0) {
+            fprintf(stderr, "job: the phases need module %s: %s\n", demo_module_names[m], chm_err_last());
+            return -1;
+        }
     return 0;
 }
 
 /* Everything off and killed (brakes on: arm_io's actuator closes). */
 static void teardown(void) {
-    for (int i = 0; i < M_COUNT; ++i)
-        if (g_spawned[i]) {
-            (void)!chm_servo_kill(g_mod[i]);
-            g_spawned[i] = 0;
+    if (!g_sys) return;
+    chm_servo_system_entry_t e;
+    unsigned rtpus = 0;
+    for (size_t i = 0; i < chm_servo_system_modules(g_sys); ++i)
+        if (chm_servo_system_module_at(g_sys, i, &e) == 0) {
+            rtpus |= 1u << e.rtpu;
+            if (e.spawned) (void)!chm_servo_kill(e.id);
         }
-    (void)!chm_servo_release(1u << 1 | 1u << 2);
+    if (rtpus) (void)!chm_servo_release(rtpus);
+    chm_servo_system_close(g_sys);
+    g_sys = NULL;
 }
 
 static int run(double tol) {
     const double zs = ARM_SURFACE_Z, xo = ARM_OBJECT_X, xt = ARM_TARGET_X;
     set_phase(PH_START);
-    if (do_switch((int[]){-1}, (int[]){M_IO, M_GRAVITY, M_TRAJ, M_PD, M_GRIPPER, -1}) ||
+    if (start_system() ||
         wait_for("the arm's first sample", arm_sampled, 0, 5) || wait_for("settling", always, 300, 5))
         return -1;
     set_phase(PH_APPROACH);
@@ -248,12 +269,13 @@ static int run(double tol) {
     printf("job: object at x = %.4f m, z = %.4f m, %s; target x = %.4f m: placement error %.2f mm "
            "(tolerance %.1f mm)\n",
            obj[0], obj[1], obj[2] != 0 ? "still held" : "resting", xt, err * 1e3, tol * 1e3);
-    for (int i = 0; i < M_COUNT; ++i) {
+    chm_servo_system_entry_t e;
+    for (size_t i = 0; i < chm_servo_system_modules(g_sys); ++i) {
         chm_servo_status_t st;
-        if (chm_servo_status(g_mod[i], &st) == 0)
-            printf("job: %-9s RTPU %d  %6llu cycles  %llu missed%s  worst cycle %.1f us\n", demo_modules[i].name,
-                   demo_modules[i].rtpu, (unsigned long long)st.cycles, (unsigned long long)st.misses,
-                   demo_modules[i].critical ? " (critical)" : "", (double)st.worst_cycle_ns / 1e3);
+        if (entry(i, &e) && chm_servo_status(e.id, &st) == 0)
+            printf("job: %-9s RTPU %d  %6llu cycles  %llu missed%s  worst cycle %.1f us\n", e.name, e.rtpu,
+                   (unsigned long long)st.cycles, (unsigned long long)st.misses, e.critical ? " (critical)" : "",
+                   (double)st.worst_cycle_ns / 1e3);
     }
     int bad = 0;
     if (obj[2] != 0 || !(err <= tol)) {
@@ -282,28 +304,24 @@ static int run(double tol) {
 
 static void usage(const char* why) {
     fprintf(stderr,
-            "chimera-arm-job: %s\nusage: chimera-arm-job --modules DIR [--backplane PATH] [--period-ms N]\n"
-            "                       [--tolerance M] [--timeout S]\n",
+            "chimera-arm-job: %s\nusage: chimera-arm-job --system FILE [--backplane PATH] [--tolerance M]\n"
+            "                       [--timeout S]\n",
             why);
     exit(2);
 }
 
 int main(int argc, char** argv) {
     char bp[512];
-    const char* dir = NULL;
+    const char* system = NULL;
     double tol = 0.015;
     if (chm_bp_default_path(bp, sizeof bp) != 0) usage("the default backplane path is too long");
     for (int i = 1; i < argc; ++i) {
         const char* a = argv[i];
         if (i + 1 >= argc) usage("an option lacks its value");
         char* end;
-        if (!strcmp(a, "--modules")) dir = argv[++i];
+        if (!strcmp(a, "--system")) system = argv[++i];
         else if (!strcmp(a, "--backplane")) snprintf(bp, sizeof bp, "%s", argv[++i]);
-        else if (!strcmp(a, "--period-ms")) {
-            const long v = strtol(argv[++i], &end, 10);
-            if (*end || v < 1 || v > 100) usage("--period-ms wants 1..100");
-            g_period_ns = (uint64_t)v * 1000000u;
-        } else if (!strcmp(a, "--tolerance")) {
+        else if (!strcmp(a, "--tolerance")) {
             tol = strtod(argv[++i], &end);
             if (*end || !(tol > 0 && tol < 1)) usage("--tolerance wants metres in (0, 1)");
         } else if (!strcmp(a, "--timeout")) {
@@ -311,23 +329,22 @@ int main(int argc, char** argv) {
             if (*end || !(g_timeout_s >= 5 && g_timeout_s <= 3600)) usage("--timeout wants 5..3600 s");
         } else usage("unknown argument");
     }
-    if (!dir) usage("--modules DIR is required");
+    if (!system) usage("--system FILE is required");
     g_deadline_ns = now_ns() + (uint64_t)(g_timeout_s * 1e9);
     if (chm_bp_attach_host(bp, "arm-job", NULL) != 0) {
         fprintf(stderr, "chimera-arm-job: %s: %s\n", bp, chm_bp_last_error());
         return 1;
     }
-    if (declare(SV_Q, CHM_SVAR_DOUBLE, 2, 1, "rad") || declare(SV_QD, CHM_SVAR_DOUBLE, 2, 1, "rad/s") ||
-        declare(SV_F, CHM_SVAR_DOUBLE, 2, 1, "N") || declare(SV_GRIP, CHM_SVAR_DOUBLE, 2, 1, "") ||
-        declare(SV_OBJ, CHM_SVAR_DOUBLE, 3, 1, "") || declare(SV_T, CHM_SVAR_DOUBLE, 1, 1, "s") ||
-        declare(SV_TAU, CHM_SVAR_DOUBLE, 2, 1, "N*m") || declare(SV_TAU_G, CHM_SVAR_DOUBLE, 2, 1, "N*m") ||
-        declare(SV_Q_REF, CHM_SVAR_DOUBLE, 2, 1, "rad") || declare(SV_QD_REF, CHM_SVAR_DOUBLE, 2, 1, "rad/s") ||
-        declare(SV_X_REF, CHM_SVAR_DOUBLE, 2, 1, "m") || declare(SV_GRIP_CMD, CHM_SVAR_DOUBLE, 1, 1, "m") ||
-        declare(SV_PHASE, CHM_SVAR_INT32, 1, 1, "") || declare(SV_SWITCHES, CHM_SVAR_DOUBLE, DEMO_SW_MAX, 4, ""))
+    if (set_up(system) != 0) {
+        teardown();
+        (void)!chm_bp_leave();
         return 1;
+    }
     const char* const outs[] = {SV_PHASE, SV_SWITCHES};
     if (chm_svar_set_create("arm-job", NULL, 0, outs, 2, &g_set) != 0) {
-        fprintf(stderr, "chimera-arm-job: %s\n", chm_bp_last_error());
+        fprintf(stderr, "chimera-arm-job: %s\n", chm_err_last());
+        teardown();
+        (void)!chm_bp_leave();
         return 1;
     }
     g_phase = chm_svar_set_local(g_set, SV_PHASE);
@@ -335,11 +352,7 @@ int main(int argc, char** argv) {
     memset(g_sw, 0, sizeof(double) * DEMO_SW_MAX * 4);
     *g_phase = 0;
     publish();
-    if (chm_servo_take(1u << 1 | 1u << 2) != 0) {
-        fprintf(stderr, "chimera-arm-job: take RTPUs 1 and 2: %s\n", chm_servo_last_error());
-        return 1;
-    }
-    int rc = spawn_all(dir) == 0 && run(tol) == 0 ? 0 : 1;
+    const int rc = run(tol) == 0 ? 0 : 1;
     teardown();
     *g_phase = DEMO_DONE;
     publish();

@@ -3,10 +3,12 @@
  * their errors against the reference, the contact force, the jaws and the
  * object, which modules are on and each one's cycles and misses; every
  * switch the job makes is printed as it appears (its instant and cost).
+ * The modules it shows are those of the system file (--system).
  * It samples the state variables every 10 ms into a CSV file (--csv) for
  * the plot (plot.py), and ends when the job says it is done, or after
  * --seconds. Exit status 0, or 1 when the job never finished. */
 #include <chimera/bp.h>
+#include <chimera/err.h>
 #include <chimera/servo.h>
 #include <chimera/svar.h>
 #include <errno.h>
@@ -44,13 +46,15 @@ static int take(sample_t* s) {
            chm_svar_get(SV_SWITCHES, s->sw, sizeof s->sw);
 }
 
-static void print_modules(void) {
+static void print_modules(const chm_servo_system_t* sys) {
     char on[160] = "", counts[400] = "";
     size_t a = 0, b = 0;
-    for (int i = 0; i < M_COUNT; ++i) {
+    for (size_t i = 0; i < chm_servo_system_modules(sys); ++i) {
+        chm_servo_system_entry_t e;
         chm_servo_module_t m;
         chm_servo_status_t st;
-        if (chm_servo_find(demo_modules[i].rtpu, demo_modules[i].name, &m) != 0 || chm_servo_status(m, &st) != 0)
+        if (chm_servo_system_module_at(sys, i, &e) != 0 || chm_servo_find(e.rtpu, e.name, &m) != 0 ||
+            chm_servo_status(m, &st) != 0)
             continue;
         if (st.state == CHM_SERVO_ON && a < sizeof on)
             a += (size_t)snprintf(on + a, sizeof on - a, " %s", st.name);
@@ -63,7 +67,8 @@ static void print_modules(void) {
 }
 
 static void usage(const char* why) {
-    fprintf(stderr, "chimera-arm-monitor: %s\nusage: chimera-arm-monitor [--backplane PATH] [--seconds N] [--csv FILE]\n",
+    fprintf(stderr, "chimera-arm-monitor: %s\nusage: chimera-arm-monitor --system FILE [--backplane PATH] [--seconds N]\n"
+            "                           [--csv FILE]\n",
             why);
     exit(2);
 }
@@ -72,17 +77,25 @@ int main(int argc, char** argv) {
     char bp[512];
     int seconds = 60;
     const char* csv_path = NULL;
+    const char* system = NULL;
     if (chm_bp_default_path(bp, sizeof bp) != 0) usage("the default backplane path is too long");
     for (int i = 1; i < argc; ++i) {
         if (i + 1 >= argc) usage("an option lacks its value");
         if (!strcmp(argv[i], "--backplane")) snprintf(bp, sizeof bp, "%s", argv[++i]);
         else if (!strcmp(argv[i], "--csv")) csv_path = argv[++i];
+        else if (!strcmp(argv[i], "--system")) system = argv[++i];
         else if (!strcmp(argv[i], "--seconds")) {
             char* end;
             const long v = strtol(argv[++i], &end, 10);
             if (*end || v < 1 || v > 3600) usage("--seconds wants 1..3600");
             seconds = (int)v;
         } else usage("unknown argument");
+    }
+    if (!system) usage("--system FILE is required");
+    chm_servo_system_t* sys = NULL;
+    if (chm_servo_system_open(system, &sys) != 0) {
+        fprintf(stderr, "chimera-arm-monitor: %s\n", chm_err_last());
+        return 1;
     }
     if (chm_bp_attach_host(bp, "arm-monitor", NULL) != 0) {
         fprintf(stderr, "chimera-arm-monitor: %s: %s\n", bp, chm_bp_last_error());
@@ -129,13 +142,14 @@ int main(int argc, char** argv) {
                    "object (%.3f, %.3f)%s\n",
                    t, demo_phase_name(s.phase), s.q[0], s.q[1], s.q_ref[0] - s.q[0], s.q_ref[1] - s.q[1], s.f[1],
                    s.grip[0], s.grip[1], s.obj[0], s.obj[1], s.obj[2] != 0 ? " held" : "");
-            print_modules();
+            print_modules(sys);
             fflush(stdout);
         }
         done = s.phase == DEMO_DONE;
         nap_ms(10);
     }
     if (csv) fclose(csv);
+    chm_servo_system_close(sys);
     (void)!chm_bp_leave();
     if (!done) {
         fprintf(stderr, "chimera-arm-monitor: the job did not finish within %d s\n", seconds);

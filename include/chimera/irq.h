@@ -62,6 +62,16 @@ CHM_CHECK int chm_irq_attach_fd(int vector, int fd, short events);
 /* Unbind the descriptor of line `vector`. Errors: -EINVAL; -ENOENT none. */
 CHM_CHECK int chm_irq_detach_fd(int vector);
 
+/* Mask every interrupt of the calling RTPU, the timer's included (so the
+ * caller is not preempted either), until the matching chm_irq_unlock;
+ * pairs nest. Interrupts raised meanwhile stay pending and are delivered
+ * at the outermost unlock. For a driver that shares data (or a lock) with
+ * its interrupt handler: keep the section short and never block in it.
+ * Called off the RTPU's kernel thread (a host process, another thread),
+ * both calls do nothing. No errors. */
+void chm_irq_lock(void);
+void chm_irq_unlock(void);
+
 /* Number of times `vector`'s handler ran (statistics, tests). */
 unsigned long chm_irq_count(int vector);
 

@@ -223,6 +223,10 @@ typedef struct {
     int on;                  /* switched on at start */
     int spawned;
     chm_servo_module_t id;   /* valid once spawned */
+    int critical;            /* in MUF's critical set */
+    int priority;
+    uint64_t deadline_ns;    /* relative; 0 = the period */
+    uint64_t wcet_ns;        /* estimated CPU per cycle; 0 = unknown */
 } chm_servo_system_entry_t;
 size_t chm_servo_system_modules(const chm_servo_system_t* sys);
 /* Errors: -EINVAL NULL or no such index. */

@@ -100,6 +100,36 @@ TEST_F(Irq, ARaiseWhileDisabledIsHeldUntilEnabled) {
     EXPECT_EQ(chm_sem_value(&sem_), 1);
 }
 
+// A driver's section shared with its handler: raised inside, delivered at
+// the outermost unlock, not before.
+void locked_section(void*) {
+    chm_irq_lock();
+    EXPECT_EQ(chm_irq_raise(5), 0);
+    chm_irq_lock();  // nests
+    const auto until = std::chrono::steady_clock::now() + std::chrono::milliseconds(20);
+    while (std::chrono::steady_clock::now() < until) {  // time for the doorbell's signal to land
+    }
+    chm_irq_unlock();
+    EXPECT_EQ(chm_irq_count(5), 0u) << "delivered inside the section";
+    chm_irq_unlock();
+    EXPECT_EQ(chm_irq_count(5), 1u) << "not delivered at the outermost unlock";
+    Irq::g_woke = 1;
+}
+
+TEST_F(Irq, ARaiseInsideALockedSectionIsDeliveredAtItsOutermostUnlock) {
+    start(CHM_SCHED_MUF, false);
+    ASSERT_EQ(chm_irq_install(5, v_handler, nullptr), 0);
+    spawn(locked_section, nullptr, "driver", 5);
+    ASSERT_EQ(chm_kernel_run(), 0);
+    EXPECT_EQ(g_woke, 1);
+    EXPECT_EQ(chm_sem_value(&sem_), 1);
+    // Off the kernel thread both calls do nothing (and nothing is left masked).
+    std::thread([] {
+        chm_irq_lock();
+        chm_irq_unlock();
+    }).join();
+}
+
 TEST_F(Irq, ARaiseBeforeAHandlerIsDeliveredOnInstall) {
     start(CHM_SCHED_MUF, false);
     ASSERT_EQ(chm_irq_raise(9), 0);

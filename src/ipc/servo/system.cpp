@@ -278,6 +278,10 @@ int chm_servo_system_module_at(const chm_servo_system_t* s, size_t i, chm_servo_
     out->on = m.on;
     out->spawned = m.spawned;
     out->id = m.id;
+    out->critical = m.spawn.critical;
+    out->priority = m.spawn.priority;
+    out->deadline_ns = m.spawn.deadline_ns;
+    out->wcet_ns = m.spawn.wcet_ns;
     return 0;
 }
 

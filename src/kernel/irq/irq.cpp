@@ -136,6 +136,15 @@ int chm_irq_enable(int vector) {
     return 0;
 }
 
+// Off the kernel thread nothing is masked: the thread's own flag decides,
+// so a lock and its unlock always agree.
+void chm_irq_lock(void) {
+    if (port::on_kernel_thread()) port::irq_disable();
+}
+void chm_irq_unlock(void) {
+    if (port::on_kernel_thread()) port::irq_restore();
+}
+
 int chm_irq_raise(int vector) {
     if (!valid(vector)) return record_failure(-EINVAL, "chm_irq_raise");
     if (port::on_kernel_thread() && port::g_irq.nest == 0 && g_k.initialised) {

@@ -9,8 +9,8 @@
 #include <cstring>
 #include <new>
 
+#include "chimera/irq.h"
 #include "drivers.hpp"
-#include "port.hpp"
 
 namespace chm::sim {
 namespace {
@@ -23,16 +23,15 @@ pthread_mutex_t g_mu = PTHREAD_MUTEX_INITIALIZER;
 Entry g_entries[CHM_DEV_MAX_DEVICES];
 
 // The registry's lock, under the interrupt mask on the kernel thread (a
-// task is never preempted holding it).
+// task is never preempted holding it; chm_irq_lock does nothing elsewhere).
 struct Guard {
-    bool masked = port::on_kernel_thread();
     Guard() {
-        if (masked) port::irq_disable();
+        chm_irq_lock();
         pthread_mutex_lock(&g_mu);
     }
     ~Guard() {
         pthread_mutex_unlock(&g_mu);
-        if (masked) port::irq_restore();
+        chm_irq_unlock();
     }
 };
 

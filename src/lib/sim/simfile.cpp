@@ -13,7 +13,7 @@
 #include <cstring>
 #include <new>
 
-#include "port.hpp"
+#include "chimera/irq.h"
 #include "simfile.hpp"
 
 namespace chm::sim {
@@ -76,14 +76,17 @@ int file_create(const char* path, chm_sim_kind kind, const void* init, std::size
     return r;
 }
 
-Locked::Locked(chm_sim_t* s) : s_(s), masked_(port::on_kernel_thread()) {
-    if (masked_) port::irq_disable();  // never preempted holding the file's lock
+// Through the public calls, not the port's inline mask: a module that
+// carries this code (the arm demo's arm_io) then refers to functions only,
+// which a lazy dlopen (chimera svar plan) leaves unresolved.
+Locked::Locked(chm_sim_t* s) : s_(s) {
+    chm_irq_lock();  // never preempted (nor interrupted) holding the file's lock
     if (pthread_mutex_lock(&header(s)->mu) == EOWNERDEAD) pthread_mutex_consistent(&header(s)->mu);
 }
 
 Locked::~Locked() {
     pthread_mutex_unlock(&header(s_)->mu);
-    if (masked_) port::irq_restore();
+    chm_irq_unlock();
 }
 
 void raise_line(chm_sim_t* s) {

@@ -100,7 +100,6 @@ public:
 
 private:
     chm_sim_t* s_;
-    bool masked_;
 };
 
 // Mark a change (state lock held): watchers polling chm_sim_seq see it.
