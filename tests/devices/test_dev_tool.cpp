@@ -13,8 +13,9 @@ using chm::test::SimDirTest;
 
 class Tool : public SimDirTest {
 protected:
-    // Run chimera-sim with `args`; its stdout, and its exit status in *rc.
-    std::string run(std::vector<std::string> args, int* rc = nullptr) {
+    // Run chimera-sim with `args`; its stdout (and stderr, with_stderr),
+    // and its exit status in *rc.
+    std::string run(std::vector<std::string> args, int* rc = nullptr, bool with_stderr = false) {
         const char* tool = std::getenv("CHIMERA_SIM_TOOL");
         if (!tool) {
             ADD_FAILURE() << "CHIMERA_SIM_TOOL not set (run through meson test)";
@@ -35,6 +36,7 @@ protected:
         args.insert(args.begin(), cmd.begin(), cmd.end());
         const pid_t p = spawn_child([&] {
             dup2(fds[1], 1);
+            if (with_stderr) dup2(fds[1], 2);
             close(fds[0]);
             std::vector<char*> argv;
             for (std::string& a : args) argv.push_back(a.data());
@@ -140,6 +142,46 @@ TEST_F(Tool, PressesTheProbeAndNamesTheSerialPeer) {
     EXPECT_NE(list.find("tty0 serial\n"), std::string::npos) << list;
     EXPECT_EQ(chm_dev_close(tty), 0);
     EXPECT_EQ(chm_dev_close(sd), 0);
+}
+
+TEST_F(Tool, GivesTheArmAGripperAndAnObjectOnItsSurface) {
+    run({"arm", "create", "arm1", "--clock", "manual", "--surface", "-0.3", "--gripper", "--object", "0.65"});
+    std::string line = run({"arm", "get", "arm1"});
+    EXPECT_EQ(field(line, "grip"), "0.0800") << "jaws open at start: " << line;
+    EXPECT_EQ(field(line, "held"), "0") << line;
+    EXPECT_EQ(field(line, "object"), "0.65,-0.3") << "resting on the surface at x: " << line;
+    run({"arm", "grip", "arm1", "0.03"});
+    run({"arm", "step", "arm1", "2000"});
+    line = run({"arm", "get", "arm1"});
+    EXPECT_NEAR(std::stod(field(line, "grip")), 0.03, 1e-3) << "the jaws follow the command: " << line;
+    EXPECT_EQ(field(line, "held"), "0") << "the tip is nowhere near the object: " << line;
+    EXPECT_EQ(field(line, "object"), "0.65,-0.3") << line;
+}
+
+TEST_F(Tool, RefusesABadValueNamingItAndCreatesNothing) {
+    struct Case {
+        std::vector<std::string> args;
+        const char* says;
+    } cases[] = {
+        {{"arm", "create", "bad", "--object", "0.5"}, "--object needs --surface"},
+        {{"arm", "create", "bad", "--surface", "-0.3", "--object", "abc"}, "--object: \"abc\" is not a number"},
+        {{"arm", "create", "bad", "--q0", "0.1,x"}, "--q0: \"x\" is not a number"},
+        {{"arm", "create", "bad", "--clock", "sundial"}, "--clock: \"sundial\""},
+        {{"adc", "create", "bad", "--bits", "40"}, "--bits: \"40\" is not a whole number"},
+    };
+    for (const Case& c : cases) {
+        int rc = 0;
+        const std::string out = run(c.args, &rc, true);
+        EXPECT_EQ(rc, 2) << out;
+        EXPECT_NE(out.find(std::string("chimera-sim: ") + c.says), std::string::npos) << out;
+        EXPECT_NE(::access((dir_ + "/bad").c_str(), F_OK), 0) << "created anyway: " << c.args[3];
+    }
+    run({"arm", "create", "arm2", "--clock", "manual"});
+    int rc = 0;
+    const std::string out = run({"arm", "step", "arm2", "-3"}, &rc, true);
+    EXPECT_EQ(rc, 2) << out;
+    EXPECT_NE(out.find("steps: \"-3\""), std::string::npos) << out;
+    EXPECT_EQ(field(run({"arm", "get", "arm2"}), "t"), "0.000000") << "the arm did not move";
 }
 
 }  // namespace

@@ -6,7 +6,9 @@
 #include <dirent.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -49,6 +51,32 @@ int fail(const char* what, int r) {
     return 1;
 }
 
+// A value that is not what its option or argument wants: main says which
+// and exits 2, before anything is created or changed.
+struct BadValue {
+    std::string why;
+};
+
+// `text` as a finite number; `what` names the option or argument.
+double num(const std::string& what, const std::string& text) {
+    char* end = nullptr;
+    errno = 0;
+    const double v = std::strtod(text.c_str(), &end);
+    if (text.empty() || *end || errno == ERANGE || !std::isfinite(v))
+        throw BadValue{what + ": \"" + text + "\" is not a number"};
+    return v;
+}
+
+// `text` as a whole number in [0, hi].
+unsigned long whole(const std::string& what, const std::string& text, unsigned long hi) {
+    char* end = nullptr;
+    errno = 0;
+    const unsigned long v = std::strtoul(text.c_str(), &end, 10);
+    if (text.empty() || text[0] == '-' || *end || errno == ERANGE || v > hi)
+        throw BadValue{what + ": \"" + text + "\" is not a whole number in 0.." + std::to_string(hi)};
+    return v;
+}
+
 // Options after the positional arguments: --name value (or a lone flag).
 struct Opts {
     std::vector<std::string> pos;
@@ -59,6 +87,10 @@ struct Opts {
         return def;
     }
     bool has(const char* k) const { return get(k) != nullptr; }
+    double number(const char* k, const char* def) const { return num(std::string("--") + k, get(k, def)); }
+    unsigned long count(const char* k, const char* def, unsigned long hi) const {
+        return whole(std::string("--") + k, get(k, def), hi);
+    }
 };
 
 Opts parse(int argc, char** argv, int from) {
@@ -151,22 +183,22 @@ int print_once(chm_sim_t* s, chm_sim_kind kind) {
 }
 
 int watch(chm_sim_t* s, chm_sim_kind kind, const Opts& o) {
-    const long count = std::strtol(o.get("count", "0"), nullptr, 10);
-    const long ms = std::strtol(o.get("interval-ms", "100"), nullptr, 10);
-    for (long i = 0; count == 0 || i < count; ++i) {
+    const unsigned long count = o.count("count", "0", 1000000000);
+    const unsigned long ms = o.count("interval-ms", "100", 3600000);
+    for (unsigned long i = 0; count == 0 || i < count; ++i) {
         if (i) usleep(useconds_t(ms > 0 ? ms : 1) * 1000);
         if (int r = print_once(s, kind); r) return r;
     }
     return 0;
 }
 
-std::vector<double> numbers(const char* csv) {
+// A comma-separated list of numbers (--q0).
+std::vector<double> numbers(const std::string& what, const std::string& csv) {
     std::vector<double> v;
-    for (const char* p = csv; p && *p;) {
-        char* end = nullptr;
-        v.push_back(std::strtod(p, &end));
-        if (end == p) break;
-        p = *end == ',' ? end + 1 : end;
+    for (std::size_t from = 0; from < csv.size();) {
+        const std::size_t comma = std::min(csv.find(',', from), csv.size());
+        v.push_back(num(what, csv.substr(from, comma - from)));
+        from = comma + 1;
     }
     return v;
 }
@@ -175,43 +207,46 @@ int create(const std::string& dev, const char* path, const Opts& o) {
     int r = -EINVAL;
     if (dev == "arm") {
         chm_sim_arm_config_t c;
-        chm_sim_arm_config_init(&c, std::uint32_t(std::strtoul(o.get("joints", "2"), nullptr, 10)));
+        chm_sim_arm_config_init(&c, std::uint32_t(o.count("joints", "2", CHM_SIM_ARM_MAX)));
         const std::string clock = o.get("clock", "monotonic");
         c.clock = clock == "manual" ? CHM_SIM_CLOCK_MANUAL : clock == "kernel" ? CHM_SIM_CLOCK_KERNEL : CHM_SIM_CLOCK_MONOTONIC;
-        c.dt_s = std::strtod(o.get("dt", "0.0005"), nullptr);
-        c.gravity = std::strtod(o.get("gravity", "9.81"), nullptr);
+        if (clock != "manual" && clock != "kernel" && clock != "monotonic")
+            throw BadValue{"--clock: \"" + clock + "\" is not monotonic, manual or kernel"};
+        c.dt_s = o.number("dt", "0.0005");
+        c.gravity = o.number("gravity", "9.81");
         if (o.has("hold")) c.stop_mode = CHM_SIM_STOP_HOLD;
         if (o.has("surface")) {
             c.contact = 1;
-            c.surface_z = std::strtod(o.get("surface"), nullptr);
+            c.surface_z = o.number("surface", nullptr);
         }
-        c.contact_k = std::strtod(o.get("k", "1e4"), nullptr);
-        c.contact_c = std::strtod(o.get("c", "50"), nullptr);
-        const std::vector<double> q0 = numbers(o.get("q0", ""));
+        c.contact_k = o.number("k", "1e4");
+        c.contact_c = o.number("c", "50");
+        const std::vector<double> q0 = numbers("--q0", o.get("q0", ""));
         for (std::size_t i = 0; i < q0.size() && i < CHM_SIM_ARM_MAX; ++i) c.q0[i] = q0[i];
         c.gripper = o.has("gripper") || o.has("object");
         if (o.has("object")) {
+            if (!o.has("surface")) throw BadValue{"--object needs --surface (the object rests on it)"};
             c.object = 1;
-            c.object_x = std::strtod(o.get("object"), nullptr);
+            c.object_x = o.number("object", nullptr);
         }
         r = chm_sim_arm_create(path, &c);
     } else if (dev == "ft") {
         chm_sim_ft_config_t c;
         chm_sim_ft_config_init(&c);
         if (o.has("arm") && chm_sim_path(o.get("arm"), c.arm_path, sizeof c.arm_path) < 0) return usage();
-        c.surface_z = std::strtod(o.get("surface", "0"), nullptr);
-        c.contact_k = std::strtod(o.get("k", "1e4"), nullptr);
-        c.contact_c = std::strtod(o.get("c", "50"), nullptr);
+        c.surface_z = o.number("surface", "0");
+        c.contact_k = o.number("k", "1e4");
+        c.contact_c = o.number("c", "50");
         r = chm_sim_ft_create(path, &c);
     } else if (dev == "adc") {
         chm_sim_adc_config_t c;
         chm_sim_adc_config_init(&c);
-        c.n_in = std::uint32_t(std::strtoul(o.get("in", "8"), nullptr, 10));
-        c.n_out = std::uint32_t(std::strtoul(o.get("out", "4"), nullptr, 10));
-        c.bits_in = std::uint32_t(std::strtoul(o.get("bits", "12"), nullptr, 10));
-        c.bits_out = std::uint32_t(std::strtoul(o.get("bits-out", o.get("bits", "12")), nullptr, 10));
-        c.vmin = std::strtod(o.get("min", "-10"), nullptr);
-        c.vmax = std::strtod(o.get("max", "10"), nullptr);
+        c.n_in = std::uint32_t(o.count("in", "8", 1024));
+        c.n_out = std::uint32_t(o.count("out", "4", 1024));
+        c.bits_in = std::uint32_t(o.count("bits", "12", 32));
+        c.bits_out = std::uint32_t(o.count("bits-out", o.get("bits", "12"), 32));
+        c.vmin = o.number("min", "-10");
+        c.vmax = o.number("max", "10");
         r = chm_sim_adc_create(path, &c);
     } else if (dev == "serial") {
         r = chm_sim_serial_create(path);
@@ -241,7 +276,7 @@ int list(const char* dir) {
 
 }  // namespace
 
-int main(int argc, char** argv) {
+int run(int argc, char** argv) {
     int i = 1;
     if (i + 1 < argc && std::strcmp(argv[i], "--dir") == 0) {
         setenv("CHIMERA_SIM_DIR", argv[i + 1], 1);
@@ -273,23 +308,21 @@ int main(int argc, char** argv) {
     } else if (cmd == "watch") {
         rc = watch(s, kind, o);
     } else if (kind == CHM_SIM_ARM && cmd == "step" && o.pos.size() == 1) {
-        r = chm_sim_arm_step(s, std::strtoull(o.pos[0].c_str(), nullptr, 10));
+        r = chm_sim_arm_step(s, whole("steps", o.pos[0], 1000000000));
     } else if (kind == CHM_SIM_ARM && cmd == "torque" && !o.pos.empty()) {
         std::vector<double> tau;
-        for (const auto& p : o.pos) tau.push_back(std::strtod(p.c_str(), nullptr));
+        for (const auto& p : o.pos) tau.push_back(num("torque", p));
         r = chm_sim_arm_set_torque(s, tau.data(), std::uint32_t(tau.size()));
     } else if (kind == CHM_SIM_ARM && cmd == "grip" && o.pos.size() == 1) {
-        r = chm_sim_arm_set_grip(s, std::strtod(o.pos[0].c_str(), nullptr));
+        r = chm_sim_arm_set_grip(s, num("opening", o.pos[0]));
     } else if (kind == CHM_SIM_ARM && (cmd == "stop" || cmd == "resume")) {
         r = cmd == "stop" ? chm_sim_arm_stop(s) : chm_sim_arm_resume(s);
     } else if (kind == CHM_SIM_FT && cmd == "probe" && o.pos.size() >= 3) {
-        const double pos[3] = {std::strtod(o.pos[0].c_str(), nullptr), std::strtod(o.pos[1].c_str(), nullptr),
-                               std::strtod(o.pos[2].c_str(), nullptr)};
-        const double vel[3] = {0, 0, o.pos.size() > 3 ? std::strtod(o.pos[3].c_str(), nullptr) : 0.0};
+        const double pos[3] = {num("x", o.pos[0]), num("y", o.pos[1]), num("z", o.pos[2])};
+        const double vel[3] = {0, 0, o.pos.size() > 3 ? num("vz", o.pos[3]) : 0.0};
         r = chm_sim_ft_set_probe(s, pos, vel);
     } else if (kind == CHM_SIM_ADC && cmd == "set" && o.pos.size() == 2) {
-        r = chm_sim_adc_set_input(s, std::uint32_t(std::strtoul(o.pos[0].c_str(), nullptr, 10)),
-                                  std::strtod(o.pos[1].c_str(), nullptr));
+        r = chm_sim_adc_set_input(s, std::uint32_t(whole("channel", o.pos[0], 1023)), num("volts", o.pos[1]));
     } else if (kind == CHM_SIM_SERIAL && cmd == "peer") {
         char peer[CHM_SIM_PATH_MAX];
         r = chm_sim_serial_peer(s, peer, sizeof peer);
@@ -305,4 +338,13 @@ int main(int argc, char** argv) {
     chm_sim_detach(s);
     if (r < 0) return fail(cmd.c_str(), r);
     return rc;
+}
+
+int main(int argc, char** argv) {
+    try {
+        return run(argc, argv);
+    } catch (const BadValue& e) {
+        std::fprintf(stderr, "chimera-sim: %s\n", e.why.c_str());
+        return 2;
+    }
 }
