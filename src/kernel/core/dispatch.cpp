@@ -349,7 +349,7 @@ void preempted_from_trampoline() {
 // A tick, or doorbell vectors left behind a switch, that arrived while the
 // mask was held; runs with the mask held.
 void pending_tick_locked(std::uint32_t why) {
-    const std::uint64_t now = now_locked();
+    const std::uint64_t now = why & port::kPendingTick ? now_exact_locked() : now_locked();
     if (why & port::kPendingTick) {
         // It may be the port's own retry (a deferred preemption) that
         // fired, not what the kernel armed: forget a one-shot (re-armed

@@ -73,7 +73,7 @@ int idle_loop_locked() {
         }
         // A ring marked pending is dispatched at the top of the loop.
         if (port::irq_take_pending_bits() & port::kPendingTick) {
-            const std::uint64_t t = now_locked();
+            const std::uint64_t t = now_exact_locked();
             timer_fired_locked(t);
             timers_run_locked(t);
             timer_program_locked(t);

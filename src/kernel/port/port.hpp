@@ -112,8 +112,14 @@ inline void call_indirect_return(void (*fn)()) { fn(); }
 
 // Monotonic time in nanoseconds since an arbitrary epoch fixed at process
 // start (CLOCK_MONOTONIC). Never goes backwards. Any context, including a
-// signal handler.
+// signal handler. It may trail or lead CLOCK_MONOTONIC by well under a
+// microsecond (posix/clock.cpp: extrapolated with the cycle counter where
+// the arch has one, CHM_PORT_HAS_CYCLE_COUNTER and cycle_counter() in
+// arch.hpp).
 std::uint64_t now_ns();
+// CLOCK_MONOTONIC itself, read now (and now_ns() continues from it): for
+// judging timer expiries against the clock that fired them.
+std::uint64_t now_exact_ns();
 
 // ------------------------------------------------------ the interrupt mask
 

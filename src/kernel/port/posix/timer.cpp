@@ -43,7 +43,7 @@ void on_timer(int, siginfo_t*, void* ucontext) {
     } else {
         g_irq.nest = 1;
         __atomic_signal_fence(__ATOMIC_SEQ_CST);
-        const std::uint64_t now = now_ns();
+        const std::uint64_t now = now_exact_ns();  // judged against the clock that fired
         if (g_tick && g_tick(now)) {
 #if CHM_PORT_HAS_PREEMPTION
             if (chm_port_preempt_hook &&

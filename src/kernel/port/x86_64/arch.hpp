@@ -25,6 +25,13 @@ inline void tas_clear(volatile std::uint8_t* b) {
 // lie outside its own section (mem/mem_text.hpp), even at -O0.
 __attribute__((always_inline)) inline void relax() { __builtin_ia32_pause(); }
 
+// The time-stamp counter: constant rate on every x86-64 Linux keeps time
+// with (the clock decides at run time whether to trust it). Not
+// serialising: a reading may move a few instructions, which a clock
+// accurate to tens of nanoseconds does not notice.
+#define CHM_PORT_HAS_CYCLE_COUNTER 1
+inline std::uint64_t cycle_counter() { return __builtin_ia32_rdtsc(); }
+
 inline constexpr const char* kArchName = "x86_64";
 // The ABI's stack alignment at a call instruction.
 inline constexpr unsigned kStackAlign = 16;

@@ -1,0 +1,104 @@
+// The port's clock (port.hpp, posix/clock.cpp): where it extrapolates with
+// the cycle counter, every reading must still lie within a microsecond of
+// CLOCK_MONOTONIC read around it, on every thread, in a signal handler, and
+// never go backwards. Without a counter (m68k, aarch64 here) it is
+// CLOCK_MONOTONIC itself and these hold trivially.
+#include <gtest/gtest.h>
+#include <signal.h>
+#include <sys/time.h>
+
+#include <atomic>
+#include <cstdint>
+#include <ctime>
+#include <thread>
+#include <vector>
+
+#include "port.hpp"
+
+namespace {
+
+constexpr std::uint64_t kToleranceNs = 1000;  // port.hpp: "well under a microsecond"
+
+std::uint64_t mono() {
+    timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return std::uint64_t(ts.tv_sec) * 1000000000u + std::uint64_t(ts.tv_nsec);
+}
+
+struct Check {
+    std::uint64_t readings = 0, outside = 0, backwards = 0, worst_ns = 0;
+    std::uint64_t last = 0;
+    void reading(std::uint64_t before, std::uint64_t t, std::uint64_t after) {
+        ++readings;
+        const std::uint64_t off = t + kToleranceNs < before ? before - t : t > after + kToleranceNs ? t - after : 0;
+        if (off) ++outside;
+        if (off > worst_ns) worst_ns = off;
+        if (t < last) ++backwards;
+        last = t;
+    }
+};
+
+// Read for `ms` milliseconds (many rebase intervals), comparing each reading.
+Check read_for(unsigned ms) {
+    Check c;
+    const std::uint64_t end = mono() + std::uint64_t(ms) * 1000000u;
+    for (std::uint64_t a = mono(); a < end; a = mono()) {
+        const std::uint64_t t = chm::port::now_ns();
+        c.reading(a, t, mono());
+    }
+    return c;
+}
+
+TEST(PortClock, EveryReadingLiesWithinAMicrosecondOfClockMonotonic) {
+    const Check c = read_for(300);
+    EXPECT_GT(c.readings, 1000u);
+    EXPECT_EQ(c.outside, 0u) << "worst " << c.worst_ns << " ns off, in " << c.readings << " readings";
+    EXPECT_EQ(c.backwards, 0u);
+}
+
+TEST(PortClock, TheExactReadingIsClockMonotonicAndTheClockGoesOnFromIt) {
+    for (int i = 0; i < 1000; ++i) {
+        const std::uint64_t a = mono(), t = chm::port::now_exact_ns(), b = mono();
+        ASSERT_GE(t, a);
+        ASSERT_LE(t, b);
+        const std::uint64_t next = chm::port::now_ns();
+        ASSERT_GE(next, t) << "went back after an exact reading";
+    }
+}
+
+TEST(PortClock, ThreadsEachKeepWithinTheBound) {
+    std::vector<Check> checks(3);
+    std::vector<std::thread> threads;
+    for (Check& c : checks) threads.emplace_back([&c] { c = read_for(100); });
+    for (auto& t : threads) t.join();
+    for (const Check& c : checks) {
+        EXPECT_EQ(c.outside, 0u) << "worst " << c.worst_ns << " ns off";
+        EXPECT_EQ(c.backwards, 0u);
+    }
+}
+
+Check g_in_handler;
+std::atomic<int> g_signals{0};
+void on_alarm(int) {
+    const std::uint64_t a = mono(), t = chm::port::now_ns();
+    g_in_handler.reading(a, t, mono());
+    g_signals.fetch_add(1);
+}
+
+TEST(PortClock, ASignalHandlerThatInterruptsAReadingReadsWithinTheBound) {
+    struct sigaction sa = {}, old = {};
+    sa.sa_handler = on_alarm;
+    ASSERT_EQ(sigaction(SIGALRM, &sa, &old), 0);
+    itimerval every = {{0, 97}, {0, 97}};  // odd: lands at every point of a reading
+    ASSERT_EQ(setitimer(ITIMER_REAL, &every, nullptr), 0);
+    const Check c = read_for(200);
+    itimerval off = {};
+    setitimer(ITIMER_REAL, &off, nullptr);
+    sigaction(SIGALRM, &old, nullptr);
+    EXPECT_GT(g_signals.load(), 10);
+    EXPECT_EQ(g_in_handler.outside, 0u) << "worst " << g_in_handler.worst_ns << " ns off in the handler";
+    EXPECT_EQ(c.outside, 0u) << "worst " << c.worst_ns << " ns off";
+    EXPECT_EQ(c.backwards, 0u);
+}
+
+}  // namespace
