@@ -67,7 +67,7 @@ void msgq_stream(Session& s) {
             "msgq_stream_24b_xrtpu",
             "cross core: a sender task on RTPU 1 (this process) pinned " + s.cpu_name(0) +
                 ", a receiver task on RTPU 2 (a forked process, its own kernel) pinned " +
-                s.cpu_name(1) + ", FIXED policy, idle_poll_ns 0 (the RTPU options of the "
+                s.cpu_name(1) + ", default config (MUF, 1 ms quantum), idle_poll_ns 0 (the RTPU options of the "
                 "backplane rows); queue of 64 24-byte slots in RTPU 2's window, blocking "
                 "chm_msgq_send / chm_msgq_receive; per message, a run's last message answered "
                 "on a second queue",
@@ -117,7 +117,7 @@ void msgq_wake_kernels(Session& s) {
     std::function<void()> body = [&] {
         const std::string config =
             "same core (" + s.cpu_name(0) + "): a task on RTPU 1 (this process) and a task on RTPU "
-            "2 (a forked process, its own kernel), FIXED policy, idle_poll_ns 0 (an idle RTPU "
+            "2 (a forked process, its own kernel), default config (MUF, 1 ms quantum), idle_poll_ns 0 (an idle RTPU "
             "sleeps on its doorbell's futex at once); queues of 8 24-byte slots in common memory, "
             "blocking chm_msgq_send / chm_msgq_receive; RT/2";
         const Stats st = s.time_ops(

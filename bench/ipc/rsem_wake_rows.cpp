@@ -56,7 +56,7 @@ void check_rsem(int r, const char* what) {
 
 std::string one_rtpu(Session& s) {
     return "one RTPU (this process, slot 1) pinned " + s.cpu_name(0) +
-           ", FIXED policy, idle_poll_ns 0, counting semaphore in common memory";
+           ", default config (MUF, 1 ms quantum), idle_poll_ns 0, counting semaphore in common memory";
 }
 
 // ---- one RTPU: P that blocks, and the V that wakes it back with the switch
@@ -246,7 +246,7 @@ void rsem_xrtpu(Session& s, const std::string& row, std::uint64_t poll_ns, const
             const std::string cfg =
                 std::string(same_core ? "same core" : "cross core") + ": RTPU 1 (this process) pinned " +
                 s.cpu_name(0) + ", RTPU 2 (a forked process, its own kernel) pinned cpu" +
-                std::to_string(other_cpu) + ", a priority-10 task on each, FIXED policy, " + mode +
+                std::to_string(other_cpu) + ", a priority-10 task on each, default config (MUF, 1 ms quantum), " + mode +
                 "; counting semaphores in common memory; chm_rsem_v on one RTPU until the task it "
                 "wakes on the other returns from chm_rsem_p; RT/2 of the ping-pong";
             // The caller's side alone: the V that grants and rings the other

@@ -92,9 +92,7 @@ Joined::~Joined() { (void)chm_bp_leave(); }
 Kernel::Kernel(int slot, std::uint64_t idle_poll_ns, std::uint64_t deadline_ns, int parent) {
     chm_kernel_config_t cfg;
     chm_kernel_config_init(&cfg);
-    cfg.policy = CHM_SCHED_FIXED;
-    cfg.quantum_ns = 0;
-    cfg.rtpu_id = slot;
+    cfg.rtpu_id = slot;  // otherwise chm_kernel_config_init's: MUF, 1 ms quantum, accounting
     cfg.idle_poll_ns = idle_poll_ns;
     kb::Kernel::forget_failure();
     g_work = 0;

@@ -51,8 +51,8 @@ struct Joined {
     Joined& operator=(const Joined&) = delete;
 };
 
-// A kernel on the calling thread of a joined process: FIXED policy, no
-// quantum, `idle_poll_ns`, its doorbell bound to the table entry, and the
+// A kernel on the calling thread of a joined process: the default
+// configuration (MUF, 1 ms quantum, CPU accounting), `idle_poll_ns`, its doorbell bound to the table entry, and the
 // guard task. The destructor unbinds and tears it down.
 class Kernel {
 public:

@@ -156,7 +156,7 @@ void rtpu_scaling(Session& s) {
         fan.add(fan_in(s, n));
     }
     const std::string cfg = "RTPU 1 = this process pinned " + s.cpu_name(0) + ", RTPU 2 pinned " + s.cpu_name(1) +
-                            " in the hand-off, every other RTPU a forked process, unpinned; FIXED policy, "
+                            " in the hand-off, every other RTPU a forked process, unpinned; default config (MUF, 1 ms quantum), "
                             "idle_poll_ns 0 (sleeping), remote semaphores in common memory, the fan-in queue "
                             "(64 x 24 B) in RTPU 1's window";
     s.write_data("scaling_rtpus", ipcb::series_json("rtpus", xs, "ops",

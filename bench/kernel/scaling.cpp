@@ -53,7 +53,7 @@ void sem_partner(void* p) {
 using Costs = std::map<std::string, Stats>;
 
 void fixed_ops(Session& s, int tasks, Costs& out) {
-    kb::Kernel k;
+    kb::Kernel k({CHM_SCHED_FIXED, 1, 0});
     Partner a;
     (void)chm_sem_init(&a.sem, CHM_SEM_BINARY, 0, 0);
     std::vector<chm_tid_t> ids;
@@ -109,7 +109,7 @@ void fixed_ops(Session& s, int tasks, Costs& out) {
 }
 
 void muf_spawn(Session& s, int tasks, Costs& out) {
-    kb::Kernel k({CHM_SCHED_MUF, 1});
+    kb::Kernel k({CHM_SCHED_MUF, 1, 0});
     std::function<void()> driver = [&] {
         const std::uint64_t far = chm_time_now() + kHour;  // never released during the run
         kb::TaskSpec bg;

@@ -6,7 +6,7 @@
 //    end in another, read with the inline cycle clock (kbench.hpp) at the
 //    last instruction before the call and the first one after it in the
 //    task that runs next; the cost of a clock read is subtracted.
-// FIXED-priority kernel, no quantum; each row's config states the rest.
+// The default configuration (kbench.hpp) unless a row says otherwise.
 #include "kbench.hpp"
 
 namespace chm::bench {
@@ -14,11 +14,7 @@ namespace {
 
 using kb::ticks;
 
-std::string where(Session& s, int accounting) {
-    return kb::pinned(s) + ", FIXED policy, cpu_accounting " + std::to_string(accounting) +
-           (accounting ? " (default: CPU time charged at every switch)"
-                       : " (CPU time charged at ticks only)");
-}
+std::string where(Session& s) { return kb::pinned(s) + ", " + kb::kDefaultConfig; }
 
 // ---- uncontended: one task, a counting semaphore
 void pv_rows(Session& s) {
@@ -27,7 +23,7 @@ void pv_rows(Session& s) {
     chm_sem_t sem;
     (void)chm_sem_init(&sem, CHM_SEM_COUNTING, 1, 0);
     std::function<void()> body = [&] {
-        const std::string w = where(s, 1) + ", counting semaphore";
+        const std::string w = where(s) + ", counting semaphore";
         s.time_ops("local_pv_noblock", w + "; chm_sem_p + chm_sem_v, count 1", [&](std::uint64_t n) {
             for (std::uint64_t i = 0; i < n; ++i) {
                 (void)chm_sem_p(&sem);
@@ -80,8 +76,8 @@ struct PingPongFigures {
     Stats p_block, v_wake_switch;
 };
 
-PingPongFigures pingpong(Session& s, int accounting) {
-    kb::Kernel k({CHM_SCHED_FIXED, accounting});
+PingPongFigures pingpong(Session& s, const kb::KernelOpts& o) {
+    kb::Kernel k(o);
     const kb::TickClock& clk = kb::tick_clock();
     PingPong a;
     (void)chm_sem_init(&a.sem, CHM_SEM_BINARY, 0, 0);
@@ -115,19 +111,21 @@ PingPongFigures pingpong(Session& s, int accounting) {
 
 void wake_switch_rows(Session& s) {
     Session::pin(s.cpu(0));
-    const PingPongFigures dflt = pingpong(s, 1);
-    const PingPongFigures f = pingpong(s, 0);
+    const PingPongFigures dflt = pingpong(s, {});
+    const PingPongFigures fixed = pingpong(s, {CHM_SCHED_FIXED, 1, 0});
+    const PingPongFigures f = pingpong(s, {CHM_SCHED_FIXED, 0, 0});
     const std::string clock = "; " + kb::tick_clock().name + " read at the call and at the first "
                               "instruction of the task that runs next, its own cost subtracted";
     // The default configuration is the figure; the faster setting beside it.
     s.emit("sem_v_wake_switch",
-           where(s, 1) + "; binary semaphore: V by a priority-1 task waking a priority-10 task "
-                         "blocked in P, until its P returns" + clock +
-               "; with cpu_accounting 0 (charged at ticks only): " + kb::fmt_ns(f.v_wake_switch.median),
+           where(s) + "; binary semaphore: V by a priority-1 task waking a priority-10 task "
+                      "blocked in P, until its P returns" + clock + "; FIXED policy, no quantum: " +
+               kb::fmt_ns(fixed.v_wake_switch.median) + "; FIXED, no quantum, cpu_accounting 0 (charged at ticks "
+               "only): " + kb::fmt_ns(f.v_wake_switch.median),
            dflt.v_wake_switch.median, dflt.v_wake_switch.min, dflt.v_wake_switch.max);
     s.emit("local_p_block",
-           where(s, 1) + "; binary semaphore: P by a priority-10 task that blocks, until the "
-                         "priority-1 task runs (it returns from its own V)" + clock,
+           where(s) + "; binary semaphore: P by a priority-10 task that blocks, until the "
+                      "priority-1 task runs (it returns from its own V)" + clock,
            dflt.p_block.median, dflt.p_block.min, dflt.p_block.max);
 }
 CHM_BENCH_MEASUREMENT(wake_switch_rows, "sem_v_wake_switch", "local_p_block");
@@ -160,7 +158,7 @@ void v_wake_row(Session& s) {
     (void)chm_sem_init(&a.b, CHM_SEM_BINARY, 0, 0);
     std::function<void()> high = [&] {
         s.time_custom("local_v_wake",
-                      where(s, 1) + "; binary semaphore: chm_sem_v by a priority-10 task waking a "
+                      where(s) + "; binary semaphore: chm_sem_v by a priority-10 task waking a "
                                     "priority-5 task blocked in P (made ready, no switch); " +
                           clk.name + " around the call, its own cost subtracted",
                       [&](std::uint64_t n) {
@@ -212,7 +210,7 @@ void contention_row(Session& s) {
     (void)chm_sem_init(&a.g, CHM_SEM_BINARY, 0, 0);
     std::function<void()> high = [&] {
         s.time_custom("resource_contention_resched",
-                      where(s, 1) + "; chm_sem_p by a priority-10 task on a binary semaphore "
+                      where(s) + "; chm_sem_p by a priority-10 task on a binary semaphore "
                                     "(CHM_SEM_INHERIT) held by a priority-1 task: block, lend the "
                                     "holder its urgency, switch to it, the holder's V hands the "
                                     "unit over, drops the inheritance and switches back, until P "

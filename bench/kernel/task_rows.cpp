@@ -2,7 +2,8 @@
 // the spawn performance target: a task spawned, run and ended (task_spawn_run_exit,
 // beside pthread create+join and a Boost.Context fiber created, run and
 // destroyed), with spawn+destroy of a task that never runs kept apart. Each row is its own timed loop, run by a
-// driver task of priority 9 on a FIXED-priority kernel; the tasks it spawns
+// driver task of priority 9 on a kernel in the default configuration
+// (aperiodic tasks under MUF are ordered by user priority); the tasks it spawns
 // have priority 1, so they are made ready but never run. Timing: the
 // harness's method (calibrated runs, median with min–max) on
 // CLOCK_MONOTONIC around batches of 200 operations; the untimed half of
@@ -23,7 +24,7 @@ void task_rows(Session& s) {
     Session::pin(s.cpu(0));
     kb::Kernel k;
     std::vector<chm_tid_t> ids(kBatch);
-    const std::string where = kb::pinned(s) + ", FIXED policy, spawned by a priority-9 task, "
+    const std::string where = kb::pinned(s) + ", " + kb::kDefaultConfig + ", spawned by a priority-9 task, "
                               "the new tasks (priority 1) never run; 64 KiB stacks from the warm "
                               "stack pool (warm-up runs first)";
     auto spawn_batch = [&] {
@@ -85,7 +86,7 @@ void task_rows(Session& s) {
         std::uint64_t ran = 0;
         const Stats st = s.time_ops(
             "task_spawn_run_exit",
-            kb::pinned(s) + ", FIXED policy, cpu_accounting 1 (default); a priority-9 task "
+            kb::pinned(s) + ", " + kb::kDefaultConfig + "; a priority-9 task "
                             "spawns a priority-10 task that runs at once, its body empty, and "
                             "ends by returning (stack back to the warm pool), then the spawner "
                             "resumes: chm_task_spawn + switch in + exit + switch back",

@@ -81,7 +81,7 @@ struct StolenFigures {
 };
 
 StolenFigures stolen(Session& s, bool locked) {
-    kb::Kernel k;  // FIXED, no quantum, cpu_accounting 1
+    kb::Kernel k({CHM_SCHED_FIXED, 1, 0});  // under MUF a periodic release would preempt the computing task
     kb::tick_clock();
     Stolen a;
     a.locked = locked;
@@ -256,7 +256,7 @@ void switch_row(Session& s) {
     real.gap_ns.reserve(std::size_t(real.cycles));
     real.late_ns.reserve(std::size_t(real.cycles));
     {
-        kb::Kernel k;
+        kb::Kernel k({CHM_SCHED_FIXED, 1, 0});
         kb::TaskSpec hi;
         hi.priority = 10;
         hi.period_ns = real.period = 2 * kMs;
