@@ -261,7 +261,9 @@ TEST_F(RealTime, CLibraryIsSafeUnderPreemption) {
     EXPECT_EQ(chm_mem_check(), 0) << "the allocator's own consistency walk";
     struct chm_mem_stats st;
     ASSERT_EQ(chm_mem_stats(&st), 0);
+#if !defined(__SANITIZE_ADDRESS__)  // under AddressSanitizer its allocator serves malloc
     EXPECT_GT(st.used_blocks + st.free_blocks, 0u) << "malloc was served by the Chimera heap";
+#endif
 }
 
 }  // namespace

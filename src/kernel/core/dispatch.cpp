@@ -7,6 +7,7 @@
 #include <sys/syscall.h>
 #include <unistd.h>
 
+#include "core/fiber_asan.hpp"
 #include "kernel.hpp"
 #include "sync/remote_wait.hpp"
 
@@ -147,7 +148,12 @@ __attribute__((noinline)) void switch_to_locked(Tcb* next, std::uint64_t now) {
     if (next && g_k.cfg.quantum_ns) quantum_arm_locked(next, now);
     ++g_k.switches;
     if (g_k.trace_switch) [[unlikely]] g_k.trace_switch(next, now);
+    // Leaving for good (an ended task): no save slot, its fake stack goes.
+    void* asan_save = nullptr;
+    asan::switch_begin(prev && prev == g_k.zombie ? nullptr : &asan_save,
+                       next ? next->stack_lo : nullptr, next ? next->stack_size : 0);
     port::context_switch_same_site(from, to);  // the kernel's only switch site
+    asan::switch_end(asan_save);
     // Back in `prev`'s context.
     if (Tcb* z = g_k.zombie) [[unlikely]] {  // its stack is no longer in use
         g_k.zombie = nullptr;

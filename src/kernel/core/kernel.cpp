@@ -5,6 +5,7 @@
 #include <sys/mman.h>
 
 #include "err/err_internal.hpp"
+#include "core/fiber_asan.hpp"
 #include "kernel.hpp"
 #include "kernel/mem/heap.hpp"
 #include "sync/remote_wait.hpp"
@@ -176,7 +177,10 @@ void chm_kernel_stop(int code) {
         ++cur->suspend_count;
         g_k.current = nullptr;
         port::Context* from = &cur->ctx;
+        void* asan_save = nullptr;
+        asan::switch_begin(&asan_save, nullptr, 0);
         port::context_switch(from, &g_k.idle_ctx);
+        asan::switch_end(asan_save);
     }
     port::irq_restore();
 }

@@ -7,6 +7,7 @@
 #include <sys/mman.h>
 
 #include "err/err_internal.hpp"
+#include "core/fiber_asan.hpp"
 #include "kernel.hpp"
 
 namespace chm::kernel {
@@ -106,6 +107,7 @@ bool tcb_view_valid(const chm_sched_task_t* s) {
 }
 
 void task_start(void* p) {
+    asan::switch_end(nullptr);  // the first time on this stack
     Tcb* t = static_cast<Tcb*>(p);
     errno = 0;
     if (Tcb* z = g_k.zombie; z && z != t) {
@@ -154,6 +156,7 @@ void task_end_locked(Tcb* t) {
 }
 
 void task_free_stack_locked(Tcb* t) {
+    asan::stack_fresh(t->stack_lo, t->stack_size);  // its frames are gone: scanned and zeroed next
     t->final_high_water = stack_dirty_estimate(t);
     stacks_release(t->stack_lo, t->stack_size, t->final_high_water);
     t->stack_lo = nullptr;
@@ -208,6 +211,7 @@ int chm_task_spawn(chm_tid_t* out, void (*entry)(void*), void* arg, const chm_ta
     t->on_deadline_arg = a.on_deadline_arg;
     t->handler_priority = a.handler_priority;
     t->joinable = a.joinable != 0;
+    asan::stack_fresh(lo, stack);
     port::context_init(&t->ctx, lo, stack, task_start, t);
     if (int e = g_k.ops->admit(g_k.ops_self, &t->s)) {
         stacks_release(lo, stack, 0);

@@ -14,6 +14,7 @@
 //  * abort-cycle: restart_aborted_cycle_locked restarts the task's entry
 //    from the top at its next release.
 #include "err/err_internal.hpp"
+#include "core/fiber_asan.hpp"
 #include "kernel.hpp"
 
 namespace chm::kernel {
@@ -72,6 +73,7 @@ void restart_aborted_cycle_locked(Tcb* cur) {
     // below the frames context_init rewrites, and never return to them.
     cur->abort_cycle = false;
     port::context_init(&cur->ctx, cur->stack_lo, cur->stack_size, task_start, cur);
+    asan::switch_begin(nullptr, cur->stack_lo, cur->stack_size);  // these frames for good
     void* discard;
     chm_port_switch(&discard, cur->ctx.sp);
     __builtin_unreachable();
