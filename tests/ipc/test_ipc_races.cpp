@@ -52,6 +52,20 @@ bool wait_stopped(pid_t p, int timeout_ms = 10000) {
     return false;
 }
 
+// Wait (bounded) until no slot names process p: it left, or its death
+// was recovered.
+bool wait_gone(pid_t p, int timeout_ms = 5000) {
+    const std::uint64_t end = now_ns() + std::uint64_t(timeout_ms) * 1000000u;
+    chm_bp_status_t st;
+    while (now_ns() < end) {
+        bool named = chm_bp_status(&st) != 0;
+        for (std::uint32_t s = 0; s < st.slots && !named; ++s) named = st.slot[s].pid == p;
+        if (!named) return true;
+        sleep_us(1000);
+    }
+    return false;
+}
+
 // A join's result as one byte for a pipe.
 char join_code(int r) { return r == 0 ? 'J' : r == -EBUSY ? 'B' : r == -ETIMEDOUT ? 'T' : 'X'; }
 
@@ -125,6 +139,25 @@ TEST_F(IpcRaces, AJoinerStalledBeforeNamingItselfIsGivenUpAndWritesNothing) {
     EXPECT_EQ(check_now(), "");
     second_go.put('g');
     EXPECT_EQ(reap(second), 0);
+}
+
+// A joiner killed after its status CAS, before naming itself, leaves a
+// JOINING slot that names nobody: the next joiner of that slot gives it up
+// (after kUnnamedConfirmMs), recovers it and takes it.
+TEST_F(IpcRaces, AJoinerKilledBeforeNamingItselfIsRecovered) {
+    create();
+    const pid_t dead = spawn([&] {
+        stop_at("bp.take_slot.before_name");
+        return chm_bp_join(path_.c_str(), 1, "dead") == 0 ? 0 : 1;
+    });
+    ASSERT_TRUE(wait_stopped(dead));
+    kill9(dead);
+    ASSERT_EQ(chm_bp_join(path_.c_str(), 1, "next"), 0) << chm_bp_last_error();
+    chm_bp_status_t st;
+    ASSERT_EQ(chm_bp_status(&st), 0);
+    EXPECT_EQ(st.slot[1].pid, getpid());
+    EXPECT_EQ(st.recoveries, 1u);
+    EXPECT_EQ(check_now(), "");
 }
 
 // Slot 1's holder dies; the process that wins its recovery stalls right
@@ -225,7 +258,7 @@ TEST_F(IpcRaces, AStalledSenderNeverWritesIntoAnotherSendersRecord) {
                                   10'000'000'000ull, &p);
         said.put(r == -ETIMEDOUT ? 't' : r == 0 ? 'p' : 'x');
         if (r == 0) xmail::cancel(&p);
-        return 0;
+        return chm_bp_leave();
     });
     ASSERT_TRUE(wait_stopped(stalled));
     sleep_us((xmail::kStaleWriteMs + 200) * 1000);
@@ -249,6 +282,34 @@ TEST_F(IpcRaces, AStalledSenderNeverWritesIntoAnotherSendersRecord) {
         << "the stalled sender's request landed in this sender's record";
     xmail::cancel(&p);
     EXPECT_EQ(xmail::phase_of(rec->state.load()), xmail::kFree);
+    EXPECT_EQ(check_now(), "");
+}
+
+// A sender killed mid-write: a dead owner's record is freed at once (no
+// stale wait), and the next sender's request goes through intact.
+TEST_F(IpcRaces, ASenderKilledMidWriteLosesItsRecord) {
+    chm_bp_config_t c = small_config();
+    c.ring_records = 1;
+    c.ring_record_size = 256;
+    create(c);
+    ASSERT_EQ(chm_bp_join(path_.c_str(), 1, "target"), 0) << chm_bp_last_error();
+    const std::string mine(100, 'T');
+    const pid_t dead = spawn([&] {
+        if (chm_bp_attach_host(path_.c_str(), "dead", nullptr) != 0) return 1;
+        stop_at("xmail.post.before_write");
+        xmail::Pending p;
+        return xmail::post(1, xmail::kFind, "x", 1, 10'000'000'000ull, &p) == 0 ? 0 : 1;
+    });
+    ASSERT_TRUE(wait_stopped(dead));
+    kill9(dead);
+    ASSERT_TRUE(wait_gone(dead));  // its slot recovered by this process's monitor
+    bp::Attachment* a = bp::current();
+    xmail::Record* rec = xmail::record_at(*a, a->ring(1), 0);
+    xmail::Pending p;
+    ASSERT_EQ(xmail::post(1, xmail::kFind, mine.data(), std::uint32_t(mine.size()), 2'000'000'000, &p), 0)
+        << chm_rtpu_last_error();
+    EXPECT_EQ(std::string(xmail::payload_of(rec), mine.size()), mine);
+    xmail::cancel(&p);
     EXPECT_EQ(check_now(), "");
 }
 
