@@ -111,7 +111,7 @@ void vacate(RtpuEntry* e, std::uint32_t gen, SlotState from) {
 // winner was later "recovered" as dead when the loser exited. Now the
 // status CAS comes first; the pid word stays a vacancy until the winner's
 // naming CAS, which fails if a judge gave the unnamed joiner up meanwhile
-// (a joiner stalled there for kConfirmMs looks dead to everyone: it loses
+// (a joiner stalled there for kUnnamedConfirmMs looks dead to everyone: it loses
 // that generation and starts over, having written nothing).
 int take_slot(const View& v, std::uint32_t s, SlotKind kind, const char* name, bool wait,
               std::uint32_t* gen_out) {
