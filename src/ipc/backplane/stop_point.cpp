@@ -12,7 +12,7 @@ std::atomic<int> g_state{0};
 
 namespace {
 
-char g_name[128];               // the armed point's name
+char g_name[128];               // the armed point's name (written before g_state says 2)
 std::atomic<bool> g_fired{false};  // stops once per process: a retry loop passes the point again
 
 void read_env() {
@@ -31,7 +31,11 @@ void read_env() {
 void hit(const char* name) {
     int s = g_state.load(std::memory_order_acquire);
     if (s == 0) {
-        read_env();
+        // One thread reads the environment (3: being read). Another that
+        // passes a point meanwhile goes on without stopping rather than
+        // wait: it may be a task of higher priority than the reader.
+        int unread = 0;
+        if (g_state.compare_exchange_strong(unread, 3, std::memory_order_acquire)) read_env();
         s = g_state.load(std::memory_order_acquire);
     }
     if (s != 2 || std::strcmp(name, g_name) != 0) return;

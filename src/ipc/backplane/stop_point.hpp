@@ -17,7 +17,7 @@
 
 namespace chm::stop {
 
-// 0: not read yet, 1: off, 2: armed (a name is set).
+// 0: not read yet, 1: off, 2: armed (a name is set), 3: being read.
 extern std::atomic<int> g_state;
 
 // The slow path: reads the environment on first use; stops the process
