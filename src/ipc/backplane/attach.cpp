@@ -144,6 +144,10 @@ int take_slot(const View& v, std::uint32_t s, SlotKind kind, const char* name, b
                 continue;  // given up as dead while we stalled: that generation is lost
             e->pid_start = self_start_time();
             fill_slot(e, kind, name);
+            // A recoverer killed between its last step and clearing its word
+            // left it behind; a live one's (about to clear it) stays.
+            if (std::uint32_t w = e->recoverer.load(std::memory_order_acquire); w && !recoverer_alive(w))
+                e->recoverer.compare_exchange_strong(w, 0, std::memory_order_acq_rel);
             std::uint32_t joining = make_status(ng, SlotState::Joining);
             if (!e->status.compare_exchange_strong(joining, make_status(ng, SlotState::Running),
                                                    std::memory_order_acq_rel))

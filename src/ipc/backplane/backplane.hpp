@@ -417,7 +417,8 @@ namespace chm::bp {
 // Recover slot `slot` of generation `gen` if its holder is dead and nobody
 // else is recovering it: rob its locks, repair, run the per-kind callbacks,
 // detach it everywhere, mark it DEAD. Returns true when this call did the
-// recovery. Safe to call from any number of processes at once.
+// recovery; false also while a live process holds the slot's recoverer
+// word (callers retry). Safe to call from any number of processes at once.
 bool recover_slot(const View& v, std::uint32_t slot, std::uint32_t gen);
 
 // A graceful leave (chm_bp_leave, slot LEAVING, registry lock held by
