@@ -66,8 +66,7 @@ inline void plant(char* base, const bp::Layout& l, const Canary& c) {
         e->pid.store(std::uint32_t(c.pid));
         e->tid.store(std::uint32_t(c.pid));
         e->pid_start = c.start;
-        e->recoverer_pid.store(std::uint32_t(c.pid));
-        e->recoverer_start_lo = std::uint32_t(c.start);
+        e->recoverer.store(bp::recoverer_word(std::uint32_t(c.pid), c.start));
         e->idle.store(3);
     }
 }

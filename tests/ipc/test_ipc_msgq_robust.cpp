@@ -127,8 +127,7 @@ TEST_F(IpcMsgqRobust, ATakenOverRecoveryAdoptsTheLockItsDeadRecovererHeld) {
     ASSERT_EQ(bp::status_state(st), bp::SlotState::Running);
     const std::uint32_t gen = bp::status_gen(st);
     reinterpret_cast<QueueHeader*>(q)->lock.token.store(bp::make_token(1, gen, true));
-    e->recoverer_start_lo = 1;
-    e->recoverer_pid.store(std::uint32_t(gone));
+    e->recoverer.store(bp::recoverer_word(std::uint32_t(gone), 1));
     ASSERT_TRUE(e->status.compare_exchange_strong(st, bp::make_status(gen, bp::SlotState::Recovering)));
     kill9(waiter);
     // This process's monitor finds the recoverer dead and takes over.

@@ -118,8 +118,7 @@ TEST_F(CanaryTest, NoSignalReachesAProcessTheTableNamesFalsely) {
         e->pid.store(cp);
         e->tid.store(cp);
         e->pid_start = cstart;
-        e->recoverer_pid.store(cp);
-        e->recoverer_start_lo = std::uint32_t(cstart);
+        e->recoverer.store(chm::bp::recoverer_word(cp, cstart));
         e->idle.store(3);  // asleep in ppoll: a ring interrupts with a directed signal
     }
     EXPECT_GT(planted, 4);
@@ -176,7 +175,7 @@ TEST_F(CanaryTest, NoSignalReachesAProcessTheTableNamesFalsely) {
     // (the parked task's record withdrawn, its grant given back) and
     // signals nobody.
     auto* e2 = chm::bp::current()->rtpu(2);
-    e2->recoverer_start_lo = std::uint32_t(cstart + 1);
+    e2->recoverer.store(chm::bp::recoverer_word(std::uint32_t(canary_), cstart + 1));
     e2->status.store(chm::bp::make_status(chm::bp::status_gen(e2->status.load()), chm::bp::SlotState::Recovering));
     EXPECT_TRUE(wait_slot(2, CHM_BP_DEAD)) << "slot 2 was not recovered";
     EXPECT_TRUE(canary_alive()) << "recovery: " << canary_status_;

@@ -228,8 +228,9 @@ TEST_F(RtpuTest, SigtermLeavesCleanlyAndRunsShutdownHooks) {
 }
 
 // A sender that dies holding records (mid-write, or before reading its
-// reply) does not wedge the ring; a live sender stuck mid-write loses its
-// records after kStaleWriteMs.
+// reply) does not wedge the ring; a live sender stuck mid-write has its
+// records set aside after kStaleWriteMs (STALE: it may still be writing
+// into them, so nobody else gets them) and freed when it dies.
 TEST_F(RtpuTest, RingSurvivesDeadAndStuckSenders) {
     create(true, 4);
     const pid_t p1 = start_rtpu(1);
@@ -286,11 +287,22 @@ TEST_F(RtpuTest, RingSurvivesDeadAndStuckSenders) {
     chm_rtpu_timeout_set(300'000'000);
     EXPECT_EQ(chm_rtpu_ping(1, nullptr), -EBUSY);  // full, for the whole (short) timeout
     chm_rtpu_timeout_set(10'000'000'000ull);
-    const std::uint64_t t0 = now_ms();
-    EXPECT_EQ(chm_rtpu_ping(1, nullptr), 0) << chm_rtpu_last_error();  // after the stale-write limit
-    EXPECT_LT(now_ms() - t0, 10000u);
+    nap_ms(chm::xmail::kStaleWriteMs + 100);
+    {
+        chm::bp::Attachment* a = chm::bp::current();
+        chm::bp::RingHeader* ring = a->ring(1);
+        (void)chm::xmail::reclaim(*a, ring);  // (or a reclaim by the server before)
+        for (std::uint32_t i = 0; i < ring->capacity; ++i)
+            EXPECT_EQ(chm::xmail::phase_of(chm::xmail::record_at(*a, ring, i)->state.load()), chm::xmail::kStale);
+    }
+    chm_rtpu_timeout_set(300'000'000);
+    EXPECT_EQ(chm_rtpu_ping(1, nullptr), -EBUSY);  // set aside, not handed out
     kill(stuck, SIGKILL);
     reap(stuck);
+    chm_rtpu_timeout_set(10'000'000'000ull);
+    const std::uint64_t t0 = now_ms();
+    EXPECT_EQ(chm_rtpu_ping(1, nullptr), 0) << chm_rtpu_last_error();  // its death frees them
+    EXPECT_LT(now_ms() - t0, 10000u);
     // Many requests through the 4-record ring, from two threads at once.
     chm_rtpu_timeout_set(0);
     int fails = 0;

@@ -1,8 +1,10 @@
 // A process's one attachment to a backplane: joining as RTPU n or as a
 // host, leaving, the status snapshot. Taking a slot is one CAS on its
 // status word (generation << 8 | state): FREE or DEAD (generation g) ->
-// JOINING (g + 1) -> RUNNING. A slot still held by a dead process is
-// recovered first, so restarting an RTPU after kill -9 needs no cleanup.
+// JOINING (g + 1), then the winner names itself (a CAS on the pid word,
+// layout.hpp) and fills the slot, then JOINING -> RUNNING. A slot still
+// held by a dead process is recovered first, so restarting an RTPU after
+// kill -9 needs no cleanup.
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
@@ -15,6 +17,7 @@
 
 #include "chimera/bp.h"
 #include "ipc/backplane/backplane.hpp"
+#include "ipc/backplane/stop_point.hpp"
 #include "lib/nap.hpp"
 
 namespace chm::bp {
@@ -69,9 +72,8 @@ void register_atfork() {
     std::atexit(leave_at_exit);
 }
 
+// After the naming CAS: the slot is ours until we leave or die.
 void fill_slot(RtpuEntry* e, SlotKind kind, const char* name) {
-    e->pid.store(std::uint32_t(::getpid()), R);
-    e->pid_start = self_start_time();
     // No kernel thread yet: a ring now must not send the timer signal to a
     // thread that has no handler for it (its default action kills). The
     // kernel publishes itself in ipc::wake_bind_kernel.
@@ -83,19 +85,44 @@ void fill_slot(RtpuEntry* e, SlotKind kind, const char* name) {
     e->urgency.store(0, R);
     e->running.store(0, R);
     e->poll_ns.store(0, R);
-    e->recoverer_pid.store(0, R);
     e->heartbeat_ms.store(mono_ms(), R);
     e->joined_ms.store(mono_ms(), R);
     std::memset(e->name, 0, sizeof e->name);
     std::memcpy(e->name, name, std::strlen(name));
 }
 
+// Vacate a slot this process holds (status `gen`, state `from`): the pid
+// word becomes the generation's vacancy before the slot is FREE, so a
+// FREE slot never names a process (the next joiner's naming CAS expects a
+// vacancy). The final CAS fails only when a judge recovered it meanwhile.
+void vacate(RtpuEntry* e, std::uint32_t gen, SlotState from) {
+    e->pid_start = 0;
+    e->pid.store(vacant_pid(gen), std::memory_order_release);
+    std::uint32_t st = make_status(gen, from);
+    e->status.compare_exchange_strong(st, make_status(gen, SlotState::Free), std::memory_order_acq_rel);
+}
+
 // Take slot s. `wait` = the caller asked for this very slot (an RTPU
 // number): wait out a recovery in progress; a host just moves on.
+//
+// The identity is written only by the process that won the slot. Writing
+// it before the status CAS (as layout 3 did) let a loser that stalled
+// between its write and its CAS overwrite the winner's pid, and the
+// winner was later "recovered" as dead when the loser exited. Now the
+// status CAS comes first; the pid word stays a vacancy until the winner's
+// naming CAS, which fails if a judge gave the unnamed joiner up meanwhile
+// (a joiner stalled there for kUnnamedConfirmMs looks dead to everyone: it loses
+// that generation and starts over, having written nothing).
 int take_slot(const View& v, std::uint32_t s, SlotKind kind, const char* name, bool wait,
               std::uint32_t* gen_out) {
     RtpuEntry* e = v.rtpu(s);
     const std::uint32_t deadline = mono_ms() + 5000;
+    auto busy_wait = [&]() -> int {  // someone else is recovering the slot
+        if (!wait) return -EBUSY;
+        if (std::int32_t(mono_ms() - deadline) > 0) return -ETIMEDOUT;
+        nap_ms(1);
+        return 0;
+    };
     for (;;) {
         std::uint32_t st = e->status.load(std::memory_order_acquire);
         const std::uint32_t gen = status_gen(st);
@@ -103,35 +130,50 @@ int take_slot(const View& v, std::uint32_t s, SlotKind kind, const char* name, b
         case SlotState::Free:
         case SlotState::Dead: {
             const std::uint32_t ng = (gen + 1) & 0xFFFFFF ? (gen + 1) & 0xFFFFFF : 1;
-            // pid first: a JOINING slot always names a process that lived.
-            e->pid_start = self_start_time();
-            e->pid.store(std::uint32_t(::getpid()), std::memory_order_release);
+            // The vacancy our naming CAS will expect, read while the slot is
+            // FREE/DEAD g. A pid or the next generation's vacancy here is
+            // not something this protocol leaves: a damaged file.
+            std::uint32_t vacancy = e->pid.load(std::memory_order_acquire);
+            if (pid_named(vacancy) || vacancy == vacant_pid(ng)) return -EBADMSG;
+            CHM_STOP_POINT("bp.take_slot.before_cas");
             if (!e->status.compare_exchange_strong(st, make_status(ng, SlotState::Joining),
                                                    std::memory_order_acq_rel))
                 continue;
+            CHM_STOP_POINT("bp.take_slot.before_name");
+            if (!e->pid.compare_exchange_strong(vacancy, std::uint32_t(::getpid()), std::memory_order_acq_rel))
+                continue;  // given up as dead while we stalled: that generation is lost
+            e->pid_start = self_start_time();
             fill_slot(e, kind, name);
-            e->status.store(make_status(ng, SlotState::Running), std::memory_order_release);
+            // A recoverer killed between its last step and clearing its word
+            // left it behind; a live one's (about to clear it) stays.
+            if (std::uint32_t w = e->recoverer.load(std::memory_order_acquire); w && !recoverer_alive(w))
+                e->recoverer.compare_exchange_strong(w, 0, std::memory_order_acq_rel);
+            std::uint32_t joining = make_status(ng, SlotState::Joining);
+            if (!e->status.compare_exchange_strong(joining, make_status(ng, SlotState::Running),
+                                                   std::memory_order_acq_rel))
+                continue;  // recovered under us (a pid_start the judges misread): start over
             *gen_out = ng;
             return 0;
         }
-        case SlotState::Joining:
+        case SlotState::Joining: {
+            // Named or not, its death is believed only when it lasts.
+            const std::uint32_t p = e->pid.load(std::memory_order_acquire);
+            if (pid_named(p) && !slot_holder_dead(v, s, st)) return -EBUSY;
+            nap_ms(pid_named(p) ? kConfirmMs : kUnnamedConfirmMs);
+            if (!joining_abandon(v, s, st, p)) continue;  // it named itself, or moved on
+            if (!recover_slot(v, s, gen))
+                if (int r = busy_wait()) return r;
+            break;
+        }
         case SlotState::Running:
         case SlotState::Leaving:
             if (!slot_holder_dead(v, s, st)) return -EBUSY;
-            if (status_state(st) == SlotState::Joining) {  // may be a racing joiner's pid: confirm
-                nap_ms(20);
-                if (e->status.load(std::memory_order_acquire) != st || !slot_holder_dead(v, s, st)) continue;
-            }
-            recover_slot(v, s, gen);
+            if (!recover_slot(v, s, gen))
+                if (int r = busy_wait()) return r;
             break;
         case SlotState::Recovering:
-            if (slot_holder_dead(v, s, st)) {
-                recover_slot(v, s, gen);  // the recoverer died too: take over
-            } else {
-                if (!wait) return -EBUSY;
-                if (std::int32_t(mono_ms() - deadline) > 0) return -ETIMEDOUT;
-                nap_ms(1);
-            }
+            if (!slot_holder_dead(v, s, st) || !recover_slot(v, s, gen))
+                if (int r = busy_wait()) return r;
             break;
         default:
             return -EBADMSG;  // not a state this layout writes
@@ -180,6 +222,7 @@ int attach(const char* path, int want, SlotKind kind, const char* name, int* slo
             slot = std::uint32_t(want);
             r = take_slot(a, slot, kind, name, true, &gen);
             if (r == -EBUSY) set_error("backplane %s: RTPU %d belongs to live process %u", path, want, a.rtpu(slot)->pid.load(R));
+            else if (r == -EBADMSG) set_error("backplane %s: RTPU %d: slot words inconsistent (damaged file)", path, want);
             else if (r) set_error("backplane %s: RTPU %d: recovery by another process did not finish", path, want);
         }
     } else {
@@ -194,8 +237,7 @@ int attach(const char* path, int want, SlotKind kind, const char* name, int* slo
     }
     if (r == 0 && (r = validate_fresh_token(a, make_token(slot, gen), why, sizeof why)) != 0) {
         set_error("backplane %s: %s", path, why);
-        a.rtpu(slot)->pid.store(0, R);
-        a.rtpu(slot)->status.store(make_status(gen, SlotState::Free), std::memory_order_release);
+        vacate(a.rtpu(slot), gen, SlotState::Running);
     }
     if (r == 0) {
         a.slot = slot;
@@ -210,8 +252,7 @@ int attach(const char* path, int want, SlotKind kind, const char* name, int* slo
         if (r) {
             std::free(a.local_refs);
             std::free(a.objects);
-            a.rtpu(slot)->pid.store(0, R);
-            a.rtpu(slot)->status.store(make_status(gen, SlotState::Free), std::memory_order_release);
+            vacate(a.rtpu(slot), gen, SlotState::Running);
         }
     }
     if (r) {
@@ -271,7 +312,10 @@ int chm_bp_leave(void) {
     monitor_stop();
     RtpuEntry* e = a.rtpu(a.slot);
     std::uint32_t st = make_status(a.gen, SlotState::Running);
-    e->status.compare_exchange_strong(st, make_status(a.gen, SlotState::Leaving), std::memory_order_acq_rel);
+    // Not ours any more only if it was (wrongly) recovered meanwhile: then
+    // its words belong to that recovery or a later generation.
+    const bool ours = e->status.compare_exchange_strong(st, make_status(a.gen, SlotState::Leaving),
+                                                        std::memory_order_acq_rel);
     // Withdraw the waiter records of tasks and threads still parked in a
     // backplane wait (an RTPU stopped under them), then drop every
     // attachment of this slot (ours and any left over).
@@ -281,11 +325,11 @@ int chm_bp_leave(void) {
             if (a.entry(i)->attached.load(R) & (1u << a.slot)) registry_detach_locked(a, i, a.slot, a.token);
         registry_unlock(a);
     }
-    e->pid.store(0, R);
-    e->pid_start = 0;
-    e->tid.store(0, R);
-    e->idle.store(0, R);
-    e->status.store(make_status(a.gen, SlotState::Free), std::memory_order_release);
+    if (ours) {
+        e->tid.store(0, R);
+        e->idle.store(0, R);
+        vacate(e, a.gen, SlotState::Leaving);
+    }
     g_attached.store(false, std::memory_order_release);
     member_forget();  // verdicts about this file's members
     unmap(&a);
@@ -326,7 +370,8 @@ int chm_bp_status(chm_bp_status_t* out) {
         o.state = chm_bp_slot_state(status_state(st));
         o.generation = status_gen(st);
         o.kind = chm_bp_slot_kind(e->kind.load(R));
-        o.pid = int32_t(e->pid.load(R));
+        const std::uint32_t pid = e->pid.load(R);
+        o.pid = pid_named(pid) ? int32_t(pid) : 0;  // a vacancy is no process
         o.tid = int32_t(e->tid.load(R));
         const std::uint32_t hb = e->heartbeat_ms.load(R);
         o.heartbeat_age_ms = hb ? now - hb : 0;

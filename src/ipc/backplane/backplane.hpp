@@ -188,9 +188,12 @@ std::uint32_t mono_ms();
 // when there is no such process or it is a zombie.
 std::uint64_t proc_start_time(int pid);
 // Is `pid` alive and (when start != 0) the process that started at `start`?
-// `start_bits` compares only the low 32 bits (recoverer records).
-bool proc_alive(int pid, std::uint64_t start, bool low32 = false);
+bool proc_alive(int pid, std::uint64_t start);
 std::uint64_t self_start_time();
+// This process as a recoverer (layout.hpp, recoverer_word), and whether
+// the process a recoverer word names is alive (0 names nobody: false).
+std::uint32_t self_recoverer_word();
+bool recoverer_alive(std::uint32_t w);
 // Give the CPU away for about `ns`: inside a Chimera task, to the other
 // tasks of its RTPU (chm_task_pause_until); elsewhere nanosleep.
 void relinquish(std::uint64_t ns);
@@ -414,7 +417,8 @@ namespace chm::bp {
 // Recover slot `slot` of generation `gen` if its holder is dead and nobody
 // else is recovering it: rob its locks, repair, run the per-kind callbacks,
 // detach it everywhere, mark it DEAD. Returns true when this call did the
-// recovery. Safe to call from any number of processes at once.
+// recovery; false also while a live process holds the slot's recoverer
+// word (callers retry). Safe to call from any number of processes at once.
 bool recover_slot(const View& v, std::uint32_t slot, std::uint32_t gen);
 
 // A graceful leave (chm_bp_leave, slot LEAVING, registry lock held by
@@ -427,8 +431,26 @@ bool recover_slot(const View& v, std::uint32_t slot, std::uint32_t gen);
 // like a dead holder's (lock_acquire_recovery).
 void withdraw_departing(const View& v, std::uint32_t slot, std::uint32_t gen, std::uint32_t token);
 
-// Is the holder of slot `slot` (as of status `st`) dead? Deep check.
+// Is the holder of slot `slot` (as of status `st`) dead? Deep check. A
+// JOINING slot whose joiner has not named itself yet (pid word not a pid
+// and not vacant_pid of its generation) is not dead: it must first be
+// given up by joining_abandon, which the judges do only after the same
+// words stayed for kConfirmMs.
 bool slot_holder_dead(const View& v, std::uint32_t slot, std::uint32_t st);
+
+// How long a JOINING slot's words must stay the same before a judge
+// believes the joiner dead (take_slot, the monitor).
+inline constexpr std::uint32_t kConfirmMs = 20;
+// The same for a joiner that has not named itself: longer, as a live one
+// stalled that long between two instructions is given up (it then starts
+// over), and only a joiner killed in that window leaves such a slot.
+inline constexpr std::uint32_t kUnnamedConfirmMs = 100;
+// Slot `slot` was JOINING with status `st` and pid word `pid` kConfirmMs
+// (kUnnamedConfirmMs when `pid` names no process) ago (pid read after st). True when both are still so and the joiner is
+// dead: named and gone, or never named and now given up by this call (CAS
+// of `pid` to vacant_pid: its own naming CAS then fails, so it never
+// writes into the slot again).
+bool joining_abandon(const View& v, std::uint32_t slot, std::uint32_t st, std::uint32_t pid);
 
 // The monitor thread of the current attachment.
 int monitor_start(Attachment* a);

@@ -25,7 +25,7 @@ void check_table(const View& v, Report& r, Summary* sum) {
         const RtpuEntry* e = v.rtpu(s);
         const std::uint32_t st = e->status.load(R);
         const std::uint32_t state = st & 0xFF, kind = e->kind.load(R);
-        const int pid = int(e->pid.load(R));
+        const std::uint32_t pid = e->pid.load(R), gen = status_gen(st);
         if (state >= kStateCount) {
             r.problem("rtpu[%u].status: state %u is not a slot state", s, state);
             continue;
@@ -36,21 +36,25 @@ void check_table(const View& v, Report& r, Summary* sum) {
         case SlotState::Joining:
         case SlotState::Running:
         case SlotState::Leaving:
-            if (pid <= 0) r.problem("rtpu[%u]: %s without a pid", s, state_name(state));
-            else if (!proc_alive(pid, e->pid_start))
-                r.problem("rtpu[%u]: %s but process %d is dead (not recovered yet)", s, state_name(state), pid);
+            if (!pid_named(pid)) r.problem("rtpu[%u]: %s without a pid (pid word %#x)", s, state_name(state), pid);
+            else if (!proc_alive(int(pid), e->pid_start))
+                r.problem("rtpu[%u]: %s but process %u is dead (not recovered yet)", s, state_name(state), pid);
             if (kind == std::uint32_t(SlotKind::Host)) ++sum->hosts; else ++sum->rtpus;
             break;
         case SlotState::Recovering:
-            if (!proc_alive(int(e->recoverer_pid.load(R)), e->recoverer_start_lo, true))
-                r.problem("rtpu[%u]: RECOVERING but its recoverer (process %u) is dead", s, e->recoverer_pid.load(R));
+            if (!recoverer_alive(e->recoverer.load(R)))
+                r.problem("rtpu[%u]: RECOVERING but its recoverer (process %u) is dead", s,
+                          recoverer_pid_of(e->recoverer.load(R)));
             ++sum->dead;
             break;
         case SlotState::Dead:
             ++sum->dead;
             [[fallthrough]];
         case SlotState::Free:
-            if (pid != 0) r.problem("rtpu[%u]: %s but pid is %d", s, state_name(state), pid);
+            // A vacancy names its generation (layout.hpp); 0 only in a new file.
+            if (pid != vacant_pid(gen) && !(pid == 0 && gen == 0))
+                r.problem("rtpu[%u]: %s (generation %u) but the pid word is %#x, not its vacancy", s,
+                          state_name(state), gen, pid);
             break;
         }
         const RingHeader* ring = v.ring(s);

@@ -31,7 +31,9 @@ static_assert(sizeof(A32) == 4);
 
 inline constexpr std::uint32_t kMagic = 0x43484D42;         // "CHMB"
 inline constexpr std::uint32_t kMagicSwapped = 0x424D4843;  // other byte order
-inline constexpr std::uint32_t kLayoutVersion = 3;  // 3: remote semaphores 64-aligned, grant words apart
+// 3: remote semaphores 64-aligned, grant words apart; 4: a vacant slot's pid
+// word names its generation, the recoverer is one word, STALE mail records.
+inline constexpr std::uint32_t kLayoutVersion = 4;
 inline constexpr std::uint32_t kPage = 4096;
 inline constexpr std::uint32_t kMaxSlots = 32;   // attach masks are uint32_t
 inline constexpr std::uint32_t kMinSlots = 2;
@@ -124,20 +126,43 @@ constexpr std::uint32_t make_status(std::uint32_t gen, SlotState s) {
 constexpr SlotState status_state(std::uint32_t st) { return static_cast<SlotState>(st & 0xFF); }
 constexpr std::uint32_t status_gen(std::uint32_t st) { return st >> 8; }
 
+// The pid word. A process that holds the slot is named by its pid (always
+// < 2^22 on Linux); a vacant slot (FREE or DEAD with generation g, or
+// JOINING g + 1 before the joiner named itself) holds vacant_pid(g). A
+// joiner names itself by one CAS from the value it saw before its status
+// CAS; a judge gives up a JOINING (g + 1) joiner that never named itself by
+// the CAS of that value to vacant_pid(g + 1). Because the vacancy names the
+// generation, a value never comes back once a generation ended, so a
+// stalled joiner's naming CAS can never land in a later generation.
+inline constexpr std::uint32_t kPidLimit = 1u << 22;  // PID_MAX_LIMIT
+inline constexpr std::uint32_t kPidVacant = 0x80000000u;
+constexpr std::uint32_t vacant_pid(std::uint32_t gen) { return kPidVacant | (gen & 0xFFFFFF); }
+constexpr bool pid_named(std::uint32_t p) { return p != 0 && p < kPidLimit; }
+
+// The recoverer word: who recovers a slot, pid | (start time & 0x3FF) << 22,
+// 0 = nobody. One word, so claiming a recovery (CAS from 0) or taking over
+// from a dead recoverer (CAS from its word) names the new recoverer in the
+// same indivisible step: two recoverers can never both think they won.
+inline constexpr std::uint32_t kRecovererStartBits = 10;
+constexpr std::uint32_t recoverer_word(std::uint32_t pid, std::uint64_t start) {
+    return (pid & (kPidLimit - 1)) | std::uint32_t(start & ((1u << kRecovererStartBits) - 1)) << 22;
+}
+constexpr std::uint32_t recoverer_pid_of(std::uint32_t w) { return w & (kPidLimit - 1); }
+
 struct RtpuEntry {
     A32 status;              // generation << 8 | SlotState
     A32 kind;                // SlotKind
-    A32 pid;                 // owning process (written before the join CAS, again after)
+    A32 pid;                 // owning process, or vacant_pid(generation) (above)
     A32 tid;                 // its kernel thread: target of a directed signal
-    std::uint64_t pid_start; // field 22 of /proc/<pid>/stat: detects pid reuse
+    std::uint64_t pid_start; // field 22 of /proc/<pid>/stat: detects pid reuse (0: unknown)
     A32 heartbeat_ms;        // monotonic ms, bumped by the owner's monitor thread
     A32 mailbox;             // futex word of the RTPU's mailbox interrupt (kernel issue)
     A32 pending;             // pending mailbox events, one bit per source (kernel issue)
     A32 idle;                // 1 while the RTPU sleeps on its mailbox futex
     A32 urgency;             // urgency of the task it runs now (port::RingFor), 0: lowest
     A32 poll_ns;             // poll this long before sleeping on the mailbox (0: never)
-    A32 recoverer_pid;       // while RECOVERING: the process doing it
-    std::uint32_t recoverer_start_lo;  // its start time, low 32 bits
+    A32 recoverer;           // recoverer_word of the process recovering it, 0: none
+    std::uint32_t reserved0; // (layout 3: the recoverer's start time)
     A32 joined_ms;           // monotonic ms of the join
     A32 running;             // id of the task it runs now (port::RingFor), 0: none
     char name[kNameMax + 1];

@@ -23,16 +23,37 @@ namespace chm::bp {
 bool slot_holder_dead(const View& v, std::uint32_t slot, std::uint32_t st) {
     const RtpuEntry* e = v.rtpu(slot);
     switch (status_state(st)) {
-    case SlotState::Joining:
+    case SlotState::Joining: {
+        const std::uint32_t p = e->pid.load(std::memory_order_acquire);
+        if (p == vacant_pid(status_gen(st))) return true;  // given up (joining_abandon)
+        if (!pid_named(p)) return false;  // not named yet: only joining_abandon may judge it
+        return !proc_alive(int(p), e->pid_start);
+    }
     case SlotState::Running:
-    case SlotState::Leaving:
-        return !proc_alive(int(e->pid.load(std::memory_order_relaxed)), e->pid_start);
+    case SlotState::Leaving: {
+        const std::uint32_t p = e->pid.load(std::memory_order_relaxed);
+        return !pid_named(p) || !proc_alive(int(p), e->pid_start);
+    }
     case SlotState::Recovering:
-        return !proc_alive(int(e->recoverer_pid.load(std::memory_order_relaxed)),
-                           e->recoverer_start_lo, true);
+        return !recoverer_alive(e->recoverer.load(std::memory_order_acquire));
     default:
         return true;
     }
+}
+
+bool joining_abandon(const View& v, std::uint32_t slot, std::uint32_t st, std::uint32_t pid) {
+    RtpuEntry* e = v.rtpu(slot);
+    if (status_state(st) != SlotState::Joining) return false;
+    // Both words unchanged since the caller saw them: the pid it read lies
+    // inside this JOINING generation (gens only grow), so the CAS below
+    // cannot land in a later one.
+    if (e->status.load(std::memory_order_acquire) != st || e->pid.load(std::memory_order_acquire) != pid)
+        return false;
+    const std::uint32_t vacated = vacant_pid(status_gen(st));
+    if (pid == vacated) return true;
+    if (pid_named(pid)) return !proc_alive(int(pid), e->pid_start);
+    std::uint32_t expect = pid;
+    return e->pid.compare_exchange_strong(expect, vacated, std::memory_order_acq_rel);
 }
 
 bool token_alive(const View& v, std::uint32_t token, bool deep) {

@@ -25,13 +25,13 @@ namespace chm::bp {
 namespace {
 
 constexpr int kPeriodMs = 10;
-constexpr std::uint32_t kConfirmMs = 20;
 
 struct Watch {
     std::uint32_t status = 0;  // the status this watch was opened for
     int pidfd = -1;
     bool gone = false;         // its process is already known dead
     std::uint32_t dead_since = 0;  // JOINING: first seen dead (ms), 0 = not
+    std::uint32_t pid_seen = 0;    // JOINING: the pid word then
 };
 
 struct Monitor {
@@ -101,20 +101,30 @@ void scan(Monitor& m) {
             forget(m.w[s]);
             continue;
         }
+        // A JOINING slot may not name its process yet (attach.cpp): it is
+        // judged on its words, which must stay the same for kConfirmMs.
+        if (state == SlotState::Joining) {
+            Watch& w = m.w[s];
+            const std::uint32_t pid = v.rtpu(s)->pid.load(std::memory_order_acquire);
+            if (w.pidfd >= 0 || w.gone) forget(w);
+            const bool alive = pid_named(pid) && !slot_holder_dead(v, s, st);
+            if (alive || w.status != st || w.pid_seen != pid || !w.dead_since) {
+                w.status = st;
+                w.pid_seen = pid;
+                w.dead_since = alive ? 0 : (now ? now : 1);
+                continue;
+            }
+            const std::uint32_t confirm = pid_named(pid) ? kConfirmMs : kUnnamedConfirmMs;
+            if (now - w.dead_since < confirm || !joining_abandon(v, s, st, pid)) continue;
+            recover_slot(v, s, status_gen(st));
+            forget(w);
+            continue;
+        }
         arm(m, s, st);
         Watch& w = m.w[s];
         bool dead = w.gone;
         if (!dead && w.pidfd < 0) dead = slot_holder_dead(v, s, st);  // the /proc fallback
-        if (!dead) {
-            w.dead_since = 0;
-            continue;
-        }
-        // A JOINING slot's pid may for an instant be a racing loser's:
-        // believe its death only when it lasts.
-        if (state == SlotState::Joining) {
-            if (!w.dead_since) w.dead_since = now ? now : 1;
-            if (now - w.dead_since < kConfirmMs || !slot_holder_dead(v, s, st)) continue;
-        }
+        if (!dead) continue;
         recover_slot(v, s, status_gen(st));
         forget(w);
     }

@@ -76,13 +76,25 @@ std::uint64_t proc_start_time(int pid) {
     return v ? v : 1;  // a start of 0 (boot) still means "alive"
 }
 
-bool proc_alive(int pid, std::uint64_t start, bool low32) {
+bool proc_alive(int pid, std::uint64_t start) {
     if (pid <= 0) return false;
     if (pid == ::getpid()) return true;
     const std::uint64_t now = proc_start_time(pid);
     if (now == 0) return false;
     if (start == 0) return true;
-    return low32 ? std::uint32_t(now) == std::uint32_t(start) : now == start;
+    return now == start;
+}
+
+std::uint32_t self_recoverer_word() {
+    return recoverer_word(std::uint32_t(::getpid()), self_start_time());
+}
+
+bool recoverer_alive(std::uint32_t w) {
+    const int pid = int(recoverer_pid_of(w));
+    if (pid == 0) return false;
+    if (pid == ::getpid()) return w == self_recoverer_word();
+    const std::uint64_t now = proc_start_time(pid);
+    return now != 0 && recoverer_word(std::uint32_t(pid), now) == w;
 }
 
 std::uint64_t self_start_time() {

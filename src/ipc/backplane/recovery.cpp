@@ -1,6 +1,9 @@
 // Recovering a dead RTPU slot. Any survivor may find the death (its monitor
-// thread, a locker, a process joining that slot); the one that wins the
-// CAS RUNNING -> RECOVERING for (slot, generation) does the work, under a
+// thread, a locker, a process joining that slot). Who recovers is decided
+// by one CAS on the slot's recoverer word (layout.hpp), which names the
+// recoverer in the same step: from 0 for a fresh recovery, from a dead
+// recoverer's word to take over. Only the holder of that word moves the
+// slot to RECOVERING (a CAS bound to the generation) and works, under a
 // recovery token of that slot (layout.hpp) that stays "alive" exactly while
 // the slot is RECOVERING and its recoverer lives. If the recoverer dies too,
 // the next survivor takes over; every step below is idempotent.
@@ -20,7 +23,7 @@
 #include <unistd.h>
 
 #include "ipc/backplane/backplane.hpp"
-#include "lib/nap.hpp"
+#include "ipc/backplane/stop_point.hpp"
 #include "ipc/xmail/xmail.hpp"
 
 namespace chm::bp {
@@ -95,8 +98,8 @@ void do_recover(const View& v, std::uint32_t slot, std::uint32_t gen) {
 
     // 3. The slot itself: its name and kind stay for the status display.
     RtpuEntry* e = v.rtpu(slot);
-    e->pid.store(0, R);
     e->pid_start = 0;
+    e->pid.store(vacant_pid(gen), std::memory_order_release);
     e->tid.store(0, R);
     e->pending.store(0, R);
     e->idle.store(0, R);
@@ -106,8 +109,8 @@ void do_recover(const View& v, std::uint32_t slot, std::uint32_t gen) {
     e->mailbox.fetch_add(1, R);
     h->recoveries.fetch_add(1, R);
     h->last_recovery_ms.store(mono_ms(), R);
-    e->recoverer_pid.store(0, R);
-    e->status.store(make_status(gen, SlotState::Dead), std::memory_order_release);
+    std::uint32_t st = make_status(gen, SlotState::Recovering);
+    e->status.compare_exchange_strong(st, make_status(gen, SlotState::Dead), std::memory_order_acq_rel);
 }
 
 }  // namespace
@@ -136,44 +139,42 @@ bool recover_slot(const View& v, std::uint32_t slot, std::uint32_t gen) {
     RtpuEntry* e = v.rtpu(slot);
     std::uint32_t st = e->status.load(std::memory_order_acquire);
     if (status_gen(st) != gen) return false;
-    const std::uint32_t me = static_cast<std::uint32_t>(::getpid());
-    const std::uint32_t me_start = static_cast<std::uint32_t>(self_start_time());
     switch (status_state(st)) {
     case SlotState::Joining:
     case SlotState::Running:
     case SlotState::Leaving:
+    case SlotState::Recovering:
         if (!slot_holder_dead(v, slot, st)) return false;
-        if (!e->status.compare_exchange_strong(st, make_status(gen, SlotState::Recovering),
-                                               std::memory_order_acq_rel))
-            return false;
-        // Only the winner writes the recoverer record. (A loser that wrote
-        // it before its CAS could land after the winner's write and name
-        // itself: when the real recoverer then died, nobody took over, and
-        // a recovery waiting for its registry lock waited for ever.) Until
-        // this store the record is a finished recovery's (pid 0) or a dead
-        // one's: a survivor that reads it as dead confirms after 20 ms
-        // that it has not changed before taking over.
-        e->recoverer_start_lo = me_start;
-        e->recoverer_pid.store(me, std::memory_order_release);
         break;
-    case SlotState::Recovering: {
-        std::uint32_t rp = e->recoverer_pid.load(std::memory_order_acquire);
-        if (!slot_holder_dead(v, slot, st)) return false;
-        // Dead recoverer: confirm after 20 ms (the record may have been a
-        // racing loser's for an instant), then take over.
-        nap_ms(20);
-        if (e->status.load(std::memory_order_acquire) != st || e->recoverer_pid.load(R) != rp ||
-            !slot_holder_dead(v, slot, st))
-            return false;
-        if (!e->recoverer_pid.compare_exchange_strong(rp, me, std::memory_order_acq_rel)) return false;
-        e->recoverer_start_lo = me_start;
-        break;
-    }
     default:
         return false;
     }
-    do_recover(v, slot, gen);
-    return true;
+    // Claim the recovery. The word is per slot, not per generation: a live
+    // holder (a recovery in progress, or one about to start or to release)
+    // makes us back off; only a dead one's word is taken over.
+    const std::uint32_t me = self_recoverer_word();
+    std::uint32_t w = e->recoverer.load(std::memory_order_acquire);
+    if (w != 0 && (w == me || recoverer_alive(w))) return false;
+    if (!e->recoverer.compare_exchange_strong(w, me, std::memory_order_acq_rel)) return false;
+    CHM_STOP_POINT("bp.recover.won");
+    auto release = [&] {
+        std::uint32_t mine = me;
+        e->recoverer.compare_exchange_strong(mine, 0, std::memory_order_acq_rel);
+    };
+    // Now ours alone: move (slot, gen) to RECOVERING, or find it there (a
+    // dead recoverer's work to finish). Anything else: it moved on.
+    st = e->status.load(std::memory_order_acquire);
+    const SlotState state = status_state(st);
+    bool go = status_gen(st) == gen;
+    if (go && state != SlotState::Recovering) {
+        go = (state == SlotState::Joining || state == SlotState::Running || state == SlotState::Leaving) &&
+             slot_holder_dead(v, slot, st) &&
+             e->status.compare_exchange_strong(st, make_status(gen, SlotState::Recovering),
+                                               std::memory_order_acq_rel);
+    }
+    if (go) do_recover(v, slot, gen);
+    release();
+    return go;
 }
 
 }  // namespace chm::bp

@@ -8,6 +8,7 @@
 #include <cstring>
 
 #include "chimera/irq.h"
+#include "ipc/backplane/stop_point.hpp"
 #include "ipc/wake/wake.hpp"
 #include "ipc/xmail/xmail.hpp"
 #include "kernel/err/last.hpp"
@@ -70,6 +71,7 @@ bool abandon(Record* r, std::uint32_t seq) {
         switch (phase_of(st)) {
         case kWriting:
         case kPosted:
+        case kStale:  // ours, set aside while we stalled: ours to free
             if (r->state.compare_exchange_strong(st, make_state(seq, kFree), Rel, R)) return false;
             break;
         case kServing:
@@ -116,12 +118,16 @@ unsigned reclaim(const bp::View& v, bp::RingHeader* ring) {
         Record* r = record_at(v, ring, i);
         std::uint32_t st = r->state.load(Acq);
         const Phase p = phase_of(st);
-        if (p != kWriting && p != kPosted && p != kReplied) continue;
+        if (p != kWriting && p != kPosted && p != kReplied && p != kStale) continue;
         const std::uint32_t owner = r->owner.load(R);
-        bool dead = !bp::token_alive(v, owner, false);
-        if (!dead && p == kWriting && std::int32_t(now - r->stamp_ms.load(R)) > std::int32_t(kStaleWriteMs))
-            dead = true;  // alive but stuck mid-write: its post will fail (-ETIMEDOUT)
-        if (dead && r->state.compare_exchange_strong(st, make_state(seq_of(st), kFree), Rel, R)) ++freed;
+        Phase to = kFree;
+        if (bp::token_alive(v, owner, false)) {
+            // Alive but stuck mid-write: set aside, not freed (xmail.hpp);
+            // its post will fail (-ETIMEDOUT).
+            if (p != kWriting || std::int32_t(now - r->stamp_ms.load(R)) <= std::int32_t(kStaleWriteMs)) continue;
+            to = kStale;
+        }
+        if (r->state.compare_exchange_strong(st, make_state(seq_of(st), to), Rel, R)) ++freed;
     }
     return freed;
 }
@@ -206,7 +212,9 @@ int post(int rtpu, Kind kind, const void* req, std::uint32_t len, std::uint64_t 
         reclaimed = false;
     }
 
-    // 2. Write and post.
+    // 2. Write and post. The record stays ours while we write: a reclaim
+    // can only set it STALE (xmail.hpp), never hand it to another sender.
+    CHM_STOP_POINT("xmail.post.before_write");
     r->kind = kind;
     r->status = 0;
     r->len = len;
@@ -217,8 +225,11 @@ int post(int rtpu, Kind kind, const void* req, std::uint32_t len, std::uint64_t 
     r->reply.store(0, R);
     if (len) std::memcpy(payload_of(r), req, len);
     std::uint32_t expect = make_state(seq, kWriting);
-    if (!r->state.compare_exchange_strong(expect, make_state(seq, kPosted), Rel, R))
-        return set_error("RTPU %d: request reclaimed as stale while being written", rtpu), -ETIMEDOUT;
+    if (!r->state.compare_exchange_strong(expect, make_state(seq, kPosted), Rel, R)) {
+        (void)abandon(r, seq);  // STALE: ours to free
+        return set_error("RTPU %d: request set aside as stale (the sender stalled over %u ms while "
+                         "writing it); not sent", rtpu, kStaleWriteMs), -ETIMEDOUT;
+    }
     if (ipc::wake_ring(std::uint32_t(rtpu), ipc::kVecExpressMail) == -EPERM) {
         // The slot's pid or thread id is not its member's (reported, last
         // error set): nobody we may wake would serve it.

@@ -8,10 +8,15 @@
 //   FREE --claim (ring lock)--> WRITING --sender--> POSTED --server--> SERVING
 //   SERVING --server--> REPLIED --sender reads--> FREE
 //   sender gives up: POSTED -> FREE, SERVING -> ABANDONED (server frees it)
-//   a dead owner's WRITING / POSTED / REPLIED record, or one WRITING for
-//   over kStaleWriteMs: reclaimed -> FREE (by the server, or by a sender
-//   that finds the ring full); a new server of the slot frees whatever its
-//   dead predecessor left SERVING or ABANDONED.
+//   a dead owner's WRITING / POSTED / REPLIED / STALE record: reclaimed ->
+//   FREE (by the server, or by a sender that finds the ring full); a new
+//   server of the slot frees whatever its dead predecessor left SERVING or
+//   ABANDONED.
+//   a live owner's record WRITING for over kStaleWriteMs: -> STALE, which
+//   nobody claims or serves; its owner frees it when it wakes (its post
+//   fails, -ETIMEDOUT), or the reclaim when it dies. Not FREE: the owner
+//   may be stalled in the middle of its writes, and a record handed to the
+//   next sender would receive the rest of them over that sender's request.
 //
 // Only the claim takes the ring's robust lock (RingHeader::lock), and only
 // for a scan and three stores: the owner token is written before the state
@@ -30,7 +35,7 @@
 namespace chm::xmail {
 
 enum Phase : std::uint32_t {
-    kFree = 0, kWriting = 1, kPosted = 2, kServing = 3, kReplied = 4, kAbandoned = 5
+    kFree = 0, kWriting = 1, kPosted = 2, kServing = 3, kReplied = 4, kAbandoned = 5, kStale = 6
 };
 constexpr std::uint32_t make_state(std::uint32_t seq, Phase p) { return seq << 4 | p; }
 constexpr Phase phase_of(std::uint32_t st) { return Phase(st & 0xF); }
@@ -152,8 +157,8 @@ int post(int rtpu, Kind kind, const void* req, std::uint32_t len, std::uint64_t 
 int await(Pending* p, void* reply, std::uint32_t cap, std::uint32_t* reply_len);
 void cancel(Pending* p);
 
-// Reclaim records of `ring` whose owner died or whose write went stale.
-// Any process; returns the number freed.
+// Reclaim records of `ring` whose owner died (freed) or whose live owner
+// stalled mid-write (set STALE). Any process; returns the number changed.
 unsigned reclaim(const bp::View& v, bp::RingHeader* ring);
 
 // A departing process (chm_bp_leave) gives up every request `token` still

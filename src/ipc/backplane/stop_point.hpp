@@ -1,0 +1,38 @@
+// Named stop points: CHM_STOP_POINT("bp.take_slot.before_cas") marks an
+// instant of a backplane protocol where a process may stall (preempted,
+// stopped, traced). A process started with CHIMERA_STOP_AT=<name> stops
+// itself there (SIGSTOP, the whole process) the first time it passes that
+// point, so a test can hold it at exactly that instant, act on the
+// backplane from other processes, then SIGCONT it (tests/ipc/test_ipc_races.cpp).
+//
+// Off (the variable unset, the normal case) a point costs one load of a
+// cached flag and one branch predicted not taken. The variable is read
+// once, at the first point a process passes. Names are "<area>.<function>.
+// <instant>"; the same names will serve fault injection at named points
+// (CHIMERA_FAULT_AT=<name>:<action>, not built yet), which is why the slow
+// path takes the name and not a number.
+#pragma once
+
+#include <atomic>
+
+namespace chm::stop {
+
+// 0: not read yet, 1: off, 2: armed (a name is set), 3: being read.
+extern std::atomic<int> g_state;
+
+// The slow path: reads the environment on first use; stops the process
+// when `name` is the armed point (once per process).
+void hit(const char* name);
+
+// Forget what was read, so the next point reads the environment again:
+// for a forked child that set CHIMERA_STOP_AT after its parent had
+// already passed a point (tests).
+void reload();
+
+}  // namespace chm::stop
+
+#define CHM_STOP_POINT(name)                                                            \
+    do {                                                                               \
+        if (__builtin_expect(::chm::stop::g_state.load(std::memory_order_relaxed) != 1, 0)) \
+            ::chm::stop::hit(name);                                                    \
+    } while (0)

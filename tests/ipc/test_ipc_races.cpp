@@ -1,0 +1,317 @@
+// Races in joining, recovery and express mail (issue 15, item 3), each
+// provoked exactly: a child runs with CHIMERA_STOP_AT naming the instant
+// (ipc/backplane/stop_point.hpp), stops itself there, the test acts from
+// other processes while it is stopped, then lets it go on (SIGCONT) and
+// checks the outcome. Every wait is bounded; the fixture kills and reaps
+// every child, stopped or not, also when a test fails.
+#include <cstdlib>
+#include <fstream>
+#include <string>
+
+#include "chimera/rtpu.h"
+#include "ipc/backplane/backplane.hpp"
+#include "ipc/backplane/stop_point.hpp"
+#include "ipc/xmail/xmail.hpp"
+#include "ipc_fixture.hpp"
+
+namespace chm::test {
+namespace {
+
+using IpcRaces = IpcTest;
+
+void print_lines(void* ctx, const char* line) { static_cast<std::string*>(ctx)->append(line).append("\n"); }
+
+// check_backplane on this process's attachment: "" when consistent.
+std::string check_now() {
+    std::string out;
+    bp::Report r;
+    r.emit = print_lines;
+    r.ctx = &out;
+    bp::check_backplane(*bp::current(), r, nullptr);
+    return out;
+}
+
+// In a forked child: stop at `point` from now on (the parent may have read
+// the environment already, so the cached verdict is dropped).
+void stop_at(const char* point) {
+    ::setenv("CHIMERA_STOP_AT", point, 1);
+    stop::reload();
+}
+
+// Wait (bounded) until process p is stopped (state T in /proc/p/stat),
+// without reaping it.
+bool wait_stopped(pid_t p, int timeout_ms = 10000) {
+    const std::uint64_t end = now_ns() + std::uint64_t(timeout_ms) * 1000000u;
+    while (now_ns() < end) {
+        std::ifstream f("/proc/" + std::to_string(p) + "/stat");
+        std::string s((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+        const auto k = s.rfind(')');
+        if (k != std::string::npos && k + 2 < s.size() && s[k + 2] == 'T') return true;
+        sleep_us(1000);
+    }
+    return false;
+}
+
+// Wait (bounded) until no slot names process p: it left, or its death
+// was recovered.
+bool wait_gone(pid_t p, int timeout_ms = 5000) {
+    const std::uint64_t end = now_ns() + std::uint64_t(timeout_ms) * 1000000u;
+    chm_bp_status_t st;
+    while (now_ns() < end) {
+        bool named = chm_bp_status(&st) != 0;
+        for (std::uint32_t s = 0; s < st.slots && !named; ++s) named = st.slot[s].pid == p;
+        if (!named) return true;
+        sleep_us(1000);
+    }
+    return false;
+}
+
+// A join's result as one byte for a pipe.
+char join_code(int r) { return r == 0 ? 'J' : r == -EBUSY ? 'B' : r == -ETIMEDOUT ? 'T' : 'X'; }
+
+// A joiner reads the slot FREE and stalls before its CAS while another
+// process takes the slot. Layout 3 wrote the pid before the CAS: the loser
+// then overwrote the winner's pid with its own, got -EBUSY, exited, and
+// the survivors recovered the live winner's slot as dead.
+TEST_F(IpcRaces, ALoserStalledBeforeItsCasLeavesTheWinnersIdentity) {
+    create();
+    Pipe loser_said, winner_ready, winner_go;
+    const pid_t loser = spawn([&] {
+        stop_at("bp.take_slot.before_cas");
+        loser_said.put(join_code(chm_bp_join(path_.c_str(), 1, "loser")));
+        return 0;
+    });
+    ASSERT_TRUE(wait_stopped(loser));
+    const pid_t winner = spawn([&] {
+        if (chm_bp_join(path_.c_str(), 1, "winner") != 0) return 1;
+        winner_ready.put('r');
+        return winner_go.get(30000) == 'g' && chm_bp_self() == 1 ? 0 : 2;
+    });
+    ASSERT_EQ(winner_ready.get(), 'r');
+    kill(loser, SIGCONT);
+    EXPECT_EQ(loser_said.get(), 'B');  // the slot belongs to a live process
+    EXPECT_EQ(reap(loser), 0);         // and the loser's pid is now a dead one
+
+    // This process's monitor recovers any slot that names a dead process.
+    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), "judge", nullptr), 0) << chm_bp_last_error();
+    sleep_us(200000);
+    chm_bp_status_t st;
+    ASSERT_EQ(chm_bp_status(&st), 0);
+    EXPECT_EQ(st.slot[1].state, CHM_BP_RUNNING);
+    EXPECT_EQ(st.slot[1].pid, winner);
+    EXPECT_STREQ(st.slot[1].name, "winner");
+    EXPECT_EQ(st.recoveries, 0u);
+    EXPECT_EQ(check_now(), "");
+    winner_go.put('g');
+    EXPECT_EQ(reap(winner), 0);
+}
+
+// The winner of the status CAS stalls before naming itself. Another
+// joiner gives it up after kConfirmMs and takes the slot; the stalled one,
+// let go, must not write its identity into the slot it lost.
+TEST_F(IpcRaces, AJoinerStalledBeforeNamingItselfIsGivenUpAndWritesNothing) {
+    create();
+    Pipe stalled_said, second_ready, second_go;
+    const pid_t stalled = spawn([&] {
+        stop_at("bp.take_slot.before_name");
+        stalled_said.put(join_code(chm_bp_join(path_.c_str(), 1, "stalled")));
+        return 0;
+    });
+    ASSERT_TRUE(wait_stopped(stalled));
+    const pid_t second = spawn([&] {
+        if (chm_bp_join(path_.c_str(), 1, "second") != 0) return 1;
+        second_ready.put('r');
+        return second_go.get(30000) == 'g' && chm_bp_self() == 1 ? 0 : 2;
+    });
+    ASSERT_EQ(second_ready.get(), 'r');
+    kill(stalled, SIGCONT);
+    EXPECT_EQ(stalled_said.get(), 'B');
+    EXPECT_EQ(reap(stalled), 0);
+
+    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), "judge", nullptr), 0) << chm_bp_last_error();
+    sleep_us(200000);
+    chm_bp_status_t st;
+    ASSERT_EQ(chm_bp_status(&st), 0);
+    EXPECT_EQ(st.slot[1].state, CHM_BP_RUNNING);
+    EXPECT_EQ(st.slot[1].pid, second);
+    EXPECT_STREQ(st.slot[1].name, "second");
+    EXPECT_EQ(st.recoveries, 1u);  // the given-up JOINING generation
+    EXPECT_EQ(check_now(), "");
+    second_go.put('g');
+    EXPECT_EQ(reap(second), 0);
+}
+
+// A joiner killed after its status CAS, before naming itself, leaves a
+// JOINING slot that names nobody: the next joiner of that slot gives it up
+// (after kUnnamedConfirmMs), recovers it and takes it.
+TEST_F(IpcRaces, AJoinerKilledBeforeNamingItselfIsRecovered) {
+    create();
+    const pid_t dead = spawn([&] {
+        stop_at("bp.take_slot.before_name");
+        return chm_bp_join(path_.c_str(), 1, "dead") == 0 ? 0 : 1;
+    });
+    ASSERT_TRUE(wait_stopped(dead));
+    kill9(dead);
+    ASSERT_EQ(chm_bp_join(path_.c_str(), 1, "next"), 0) << chm_bp_last_error();
+    chm_bp_status_t st;
+    ASSERT_EQ(chm_bp_status(&st), 0);
+    EXPECT_EQ(st.slot[1].pid, getpid());
+    EXPECT_EQ(st.recoveries, 1u);
+    EXPECT_EQ(check_now(), "");
+}
+
+// Slot 1's holder dies; the process that wins its recovery stalls right
+// after winning. Layout 3 set RECOVERING and named the recoverer in two
+// steps: a second process saw RECOVERING with no live recoverer, took
+// over and recovered; the first, let go, recovered the same generation
+// again and overwrote the slot (DEAD) under the second, which had joined.
+TEST_F(IpcRaces, TwoRecoverersNeverRecoverTheSameDeathAtOnce) {
+    create();
+    Pipe victim_ready;
+    const pid_t victim = spawn([&] {
+        if (chm_bp_join(path_.c_str(), 1, "victim") != 0) return 1;
+        victim_ready.put('r');
+        pause();
+        return 0;
+    });
+    ASSERT_EQ(victim_ready.get(), 'r');
+    kill9(victim);
+
+    Pipe said1, said2, go;
+    auto joiner = [&](const char* name, Pipe& said, const char* point) {
+        return spawn([&, name, point] {
+            if (point) stop_at(point);
+            const int r = chm_bp_join(path_.c_str(), 1, name);
+            said.put(join_code(r));
+            if (r != 0) return 0;
+            return go.get(30000) == 'g' ? 0 : 2;
+        });
+    };
+    const pid_t first = joiner("first", said1, "bp.recover.won");
+    ASSERT_TRUE(wait_stopped(first));
+    const pid_t second = joiner("second", said2, nullptr);
+    sleep_us(300000);  // the second has found the death and acted on it
+    kill(first, SIGCONT);
+    const int c1 = said1.get(10000), c2 = said2.get(10000);
+    EXPECT_TRUE((c1 == 'J' && c2 == 'B') || (c1 == 'B' && c2 == 'J')) << char(c1) << " " << char(c2);
+
+    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), "judge", nullptr), 0) << chm_bp_last_error();
+    chm_bp_status_t st;
+    ASSERT_EQ(chm_bp_status(&st), 0);
+    EXPECT_EQ(st.recoveries, 1u) << "the victim's death was recovered more than once";
+    EXPECT_EQ(st.slot[1].state, CHM_BP_RUNNING);
+    EXPECT_EQ(st.slot[1].pid, c1 == 'J' ? first : second);
+    EXPECT_EQ(check_now(), "");
+    go.put('g');
+    go.put('g');
+    EXPECT_EQ(reap(first), 0);
+    EXPECT_EQ(reap(second), 0);
+}
+
+// The recoverer is killed right after winning: the next survivor (this
+// process's monitor) takes the recovery over, exactly once.
+TEST_F(IpcRaces, ARecovererKilledAfterWinningIsTakenOver) {
+    create();
+    Pipe victim_ready;
+    const pid_t victim = spawn([&] {
+        if (chm_bp_join(path_.c_str(), 1, "victim") != 0) return 1;
+        victim_ready.put('r');
+        pause();
+        return 0;
+    });
+    ASSERT_EQ(victim_ready.get(), 'r');
+    kill9(victim);
+    const pid_t first = spawn([&] {
+        stop_at("bp.recover.won");
+        return chm_bp_join(path_.c_str(), 1, "first") == 0 ? 0 : 1;
+    });
+    ASSERT_TRUE(wait_stopped(first));
+    kill9(first);
+    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), "judge", nullptr), 0) << chm_bp_last_error();
+    ASSERT_TRUE(wait_slot_state(1, CHM_BP_DEAD, 5000));
+    chm_bp_status_t st;
+    ASSERT_EQ(chm_bp_status(&st), 0);
+    EXPECT_EQ(st.recoveries, 1u);
+    EXPECT_EQ(check_now(), "");
+}
+
+// A sender claims the only record of RTPU 1's ring and stalls before
+// writing its request. After kStaleWriteMs another sender finds the ring
+// full and reclaims. Layout 3 freed the record and handed it to that
+// sender; the stalled one, let go, wrote its request over the new one
+// (then failed its post). Now the record is set aside (STALE) until its
+// stalled owner frees it.
+TEST_F(IpcRaces, AStalledSenderNeverWritesIntoAnotherSendersRecord) {
+    chm_bp_config_t c = small_config();
+    c.ring_records = 1;
+    c.ring_record_size = 256;
+    create(c);
+    // This process is RTPU 1 without a server: posted requests stay posted.
+    ASSERT_EQ(chm_bp_join(path_.c_str(), 1, "target"), 0) << chm_bp_last_error();
+    std::string mine(100, 'T'), theirs(100, 'S');
+    Pipe said;
+    const pid_t stalled = spawn([&] {
+        if (chm_bp_attach_host(path_.c_str(), "stalled", nullptr) != 0) return 1;
+        stop_at("xmail.post.before_write");
+        xmail::Pending p;
+        const int r = xmail::post(1, xmail::kFind, theirs.data(), std::uint32_t(theirs.size()),
+                                  10'000'000'000ull, &p);
+        said.put(r == -ETIMEDOUT ? 't' : r == 0 ? 'p' : 'x');
+        if (r == 0) xmail::cancel(&p);
+        return chm_bp_leave();
+    });
+    ASSERT_TRUE(wait_stopped(stalled));
+    sleep_us((xmail::kStaleWriteMs + 200) * 1000);
+
+    bp::Attachment* a = bp::current();
+    xmail::Record* rec = xmail::record_at(*a, a->ring(1), 0);
+    xmail::Pending p;
+    int r = xmail::post(1, xmail::kFind, mine.data(), std::uint32_t(mine.size()), 300'000'000, &p);
+    if (r != 0) {
+        EXPECT_EQ(r, -EBUSY) << chm_rtpu_last_error();
+        EXPECT_EQ(xmail::phase_of(rec->state.load()), xmail::kStale);
+    }
+    kill(stalled, SIGCONT);
+    EXPECT_EQ(said.get(10000), 't');  // its post failed: set aside as stale
+    EXPECT_EQ(reap(stalled), 0);
+    if (r != 0) r = xmail::post(1, xmail::kFind, mine.data(), std::uint32_t(mine.size()), 2'000'000'000, &p);
+    ASSERT_EQ(r, 0);
+    EXPECT_EQ(xmail::phase_of(rec->state.load()), xmail::kPosted);
+    EXPECT_EQ(rec->len, mine.size());
+    EXPECT_EQ(std::string(xmail::payload_of(rec), mine.size()), mine)
+        << "the stalled sender's request landed in this sender's record";
+    xmail::cancel(&p);
+    EXPECT_EQ(xmail::phase_of(rec->state.load()), xmail::kFree);
+    EXPECT_EQ(check_now(), "");
+}
+
+// A sender killed mid-write: a dead owner's record is freed at once (no
+// stale wait), and the next sender's request goes through intact.
+TEST_F(IpcRaces, ASenderKilledMidWriteLosesItsRecord) {
+    chm_bp_config_t c = small_config();
+    c.ring_records = 1;
+    c.ring_record_size = 256;
+    create(c);
+    ASSERT_EQ(chm_bp_join(path_.c_str(), 1, "target"), 0) << chm_bp_last_error();
+    const std::string mine(100, 'T');
+    const pid_t dead = spawn([&] {
+        if (chm_bp_attach_host(path_.c_str(), "dead", nullptr) != 0) return 1;
+        stop_at("xmail.post.before_write");
+        xmail::Pending p;
+        return xmail::post(1, xmail::kFind, "x", 1, 10'000'000'000ull, &p) == 0 ? 0 : 1;
+    });
+    ASSERT_TRUE(wait_stopped(dead));
+    kill9(dead);
+    ASSERT_TRUE(wait_gone(dead));  // its slot recovered by this process's monitor
+    bp::Attachment* a = bp::current();
+    xmail::Record* rec = xmail::record_at(*a, a->ring(1), 0);
+    xmail::Pending p;
+    ASSERT_EQ(xmail::post(1, xmail::kFind, mine.data(), std::uint32_t(mine.size()), 2'000'000'000, &p), 0)
+        << chm_rtpu_last_error();
+    EXPECT_EQ(std::string(xmail::payload_of(rec), mine.size()), mine);
+    xmail::cancel(&p);
+    EXPECT_EQ(check_now(), "");
+}
+
+}  // namespace
+}  // namespace chm::test
