@@ -5,6 +5,10 @@
 BUILD       ?= build
 BUILD_BENCH ?= build-release
 BUILD_FUZZ  ?= build-fuzz
+BUILD_ASAN  ?= build-asan
+# The suites make test-asan runs under AddressSanitizer + UBSan. The others
+# say in their meson.build why they cannot (rtpu, host, bench).
+ASAN_SUITES = kernel port ipc svar servo config matrix devices errors
 FUZZ_SECONDS ?= 300
 MESON_TEST  ?= meson test --print-errorlogs --num-processes 2
 
@@ -19,7 +23,7 @@ PKGS_FUZZ  = clang libclang-rt-14-dev
 FUZZ_TARGETS = fuzz_backplane fuzz_msgq fuzz_xmail fuzz_args fuzz_config fuzz_servo fuzz_cmdi fuzz_host
 
 .PHONY: all deps deps-cross deps-bench deps-fuzz build demo demo-loop demo-multi stress test test-native test-m68k \
-        test-aarch64 test-fuzz fuzz fuzz-seeds bench clean
+        test-aarch64 test-fuzz test-asan fuzz fuzz-seeds bench clean
 
 all: build
 
@@ -60,7 +64,24 @@ demo-loop: build
 demo-multi: build
 	@sh examples/multi/demo.sh $(BUILD)
 
-test: test-native test-m68k test-aarch64 test-fuzz
+test: test-native test-m68k test-aarch64 test-fuzz test-asan
+
+# The core suites again with AddressSanitizer and UndefinedBehaviorSanitizer
+# (the kernel tells them of every stack switch: src/kernel/core/fiber_asan.hpp);
+# any report fails the test. Only what those suites need is built.
+$(BUILD_ASAN)/build.ninja:
+	meson setup $(BUILD_ASAN) -Db_sanitize=address,undefined -Db_lundef=false
+
+test-asan: deps $(BUILD_ASAN)/build.ninja
+	ninja -C $(BUILD_ASAN) build.ninja  # regenerated first: the target list comes from it
+	ninja -C $(BUILD_ASAN) $$(python3 tools/check/suite_targets.py $(BUILD_ASAN) $(ASAN_SUITES))
+	ASAN_OPTIONS=handle_segv=0:handle_sigbus=0:handle_sigfpe=0:handle_sigill=0 \
+	UBSAN_OPTIONS=halt_on_error=1:print_stacktrace=1 $(MESON_TEST) -C $(BUILD_ASAN) --no-rebuild \
+	    $(foreach s,$(ASAN_SUITES),--suite $(s))
+	@# A stack switch the sanitizer was not told of only warns ("false positive
+	@# error reports may follow"): here it fails.
+	@! grep -m3 'WARNING: ASan' $(BUILD_ASAN)/meson-logs/testlog.txt || \
+	    (echo 'test-asan: AddressSanitizer was not told of a stack switch (above)'; exit 1)
 
 # The kill-at-a-named-point tests with 2000 kills per point, not 100, and
 # the differential scheduler test with 20,000 sets per policy, random seed.

@@ -28,6 +28,15 @@ const char* type_name(std::uint32_t t) {
     }
 }
 
+// A C caller may store any int in an enum field: read it as the integer it
+// is (loading an out-of-range enum is undefined in C++).
+std::uint32_t raw_type(const chm_svar_decl_t* d) {
+    static_assert(sizeof d->type == sizeof(std::uint32_t));
+    std::uint32_t v;
+    std::memcpy(&v, &d->type, sizeof v);
+    return v;
+}
+
 int check_decl(const chm_svar_decl_t* d) {
     if (!d || !d->name || !d->name[0])
         return bp::set_error("chm_svar_declare: NULL declaration or empty name"), -EINVAL;
@@ -36,8 +45,8 @@ int check_decl(const chm_svar_decl_t* d) {
                -ENAMETOOLONG;
     if (d->unit && std::strlen(d->unit) > CHM_SVAR_UNIT_MAX)
         return bp::set_error("chm_svar_declare %s: unit longer than %d", d->name, CHM_SVAR_UNIT_MAX), -ENAMETOOLONG;
-    if (!elem_size(std::uint32_t(d->type)))
-        return bp::set_error("chm_svar_declare %s: unknown type %d", d->name, int(d->type)), -EINVAL;
+    if (!elem_size(raw_type(d)))
+        return bp::set_error("chm_svar_declare %s: unknown type %u", d->name, raw_type(d)), -EINVAL;
     if (d->rows == 0 || d->cols == 0 || std::uint64_t(d->rows) * d->cols > kElemsMax)
         return bp::set_error("chm_svar_declare %s: shape %ux%u (1..%u elements)", d->name, d->rows, d->cols,
                              kElemsMax),

@@ -12,7 +12,9 @@ static volatile int* volatile nowhere;
 typedef struct { double* f; uint64_t n; int cleared; } state_t;
 
 static int where(chm_module_t* m) { return (int)chm_module_params(m)[0]; }
-static int init(chm_module_t* m) {
+/* The faults are the point: not the sanitizers' business (make test-asan). */
+#define FAULTS_ON_PURPOSE __attribute__((no_sanitize("undefined")))
+FAULTS_ON_PURPOSE static int init(chm_module_t* m) {
     state_t* s = chm_module_state(m);
     s->f = chm_module_var(m, "f");
     if (where(m) == 1) return 3;
@@ -23,7 +25,7 @@ static int on(chm_module_t* m) { return where(m) == 5 ? 9 : 0; }
 static int off(chm_module_t* m) { (void)m; return 0; }
 static int kill_(chm_module_t* m) { (void)m; return 0; }
 static int clear(chm_module_t* m) { ((state_t*)chm_module_state(m))->cleared++; return 0; }
-static int cycle(chm_module_t* m) {
+FAULTS_ON_PURPOSE static int cycle(chm_module_t* m) {
     state_t* s = chm_module_state(m);
     ++s->n;
     *s->f = (double)s->n;
