@@ -5,6 +5,8 @@
 // process-local geometry and bounds the one or two indices it reads from
 // shared memory per call (queue.cpp). A failure is bp::kCorrupt with a
 // text naming the queue and the field.
+#include <array>
+#include <atomic>
 #include <cstdarg>
 #include <cstdio>
 
@@ -114,9 +116,27 @@ int validate_entry(const bp::View& v, std::uint32_t off, std::uint32_t size, con
     char what[200];
     Geo g;
     int r = read_geometry(q, size, &g, what, sizeof what);
-    // A queue locked by anyone may be mid-change (a dead holder's is
-    // rebuilt by whoever robs the lock): only its geometry is checked.
-    if (r == 0 && q->lock.token.load(R) == 0 && !q->broken.load(R)) r = validate_locked(q, g, what, sizeof what);
+    // The lists are walked without the lock (a checker may not take it): a
+    // verdict counts only when the lock was free and no send, receive or
+    // repair happened from before the walk to after it; otherwise the queue
+    // was mid-change (a dead holder's is rebuilt by whoever robs the lock)
+    // and the walk is tried again, a few times, then only the geometry
+    // stands. (Before, a send landing during the walk read as corruption:
+    // "count is 1, the lists hold 0".)
+    for (int attempt = 0; r == 0 && attempt < 8; ++attempt) {
+        const auto stamp = [q] {
+            return std::array<std::uint32_t, 5>{q->lock.token.load(std::memory_order_acquire), q->sent.load(R),
+                                                 q->received.load(R), q->repairs.load(R), q->broken.load(R)};
+        };
+        const auto before = stamp();
+        if (before[0] != 0 || before[4] != 0) break;  // held or broken: geometry only
+        const int walked = validate_locked(q, g, what, sizeof what);
+        std::atomic_thread_fence(std::memory_order_acquire);
+        if (stamp() == before) {
+            r = walked;
+            break;
+        }
+    }
     if (r) corrupt(why, n, "%s: %s", name, what);
     return r;
 }
