@@ -187,6 +187,37 @@ TEST_F(IpcValidate, ALiveQueueInUseIsNeverReportedCorrupt) {
     EXPECT_EQ(chm_bp_leave(), 0);
 }
 
+// The same for a remote semaphore whose waiter records come and go.
+TEST_F(IpcValidate, ALiveSemaphoreInUseIsNeverReportedCorrupt) {
+    create();
+    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), "user", nullptr), 0) << chm_bp_last_error();
+    chm_rsem_t* sem = nullptr;
+    ASSERT_EQ(chm_rsem_create("busy", CHM_SEM_COUNTING, 0, CHM_SHM_COMMON, &sem), 0) << chm_bp_last_error();
+    std::atomic<bool> stop{false};
+    std::atomic<std::uint64_t> taken{0};
+    std::thread waiter([&] {  // blocks in P: a waiting record, granted, freed
+        while (!stop.load())
+            if (chm_rsem_p_timed(sem, 50'000'000) == 0) taken.fetch_add(1);
+    });
+    std::thread giver([&] {
+        while (!stop.load())
+            if (chm_rsem_value(sem) == 0) (void)chm_rsem_v(sem);
+    });
+    int refused = 0, checks = 0;
+    std::string first;
+    const std::uint64_t end = now_ns() + 2'000'000'000ull;
+    for (; checks < 3000 && now_ns() < end; ++checks)
+        if (chm_bp_validate(path_.c_str()) != 0 && refused++ == 0) first = chm_bp_last_error();
+    stop.store(true);
+    (void)chm_rsem_v(sem);
+    waiter.join();
+    giver.join();
+    EXPECT_GT(taken.load(), 100u) << "the semaphore was not in use";
+    EXPECT_EQ(refused, 0) << "of " << checks << " checks; the first: " << first;
+    EXPECT_EQ(chm_rsem_close(sem), 0);
+    EXPECT_EQ(chm_bp_leave(), 0);
+}
+
 TEST_F(IpcValidate, ACorruptStructureIsRefusedAtAttachNamingTheField) {
     const Case cases[] = {
         {"ring capacity 0", kAtAttach, "ring[1].capacity", [](const Image& i) { i.ring(1)->capacity = 0; }},
