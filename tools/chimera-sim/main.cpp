@@ -302,6 +302,12 @@ int run(int argc, char** argv) {
     if (!kind) return usage();
     chm_sim_t* s = nullptr;
     if (int r = attach(argv[i + 2], &s, kind); r) return r;
+    struct Detach {  // also when a bad value throws below
+        chm_sim_t*& s;
+        ~Detach() {
+            if (s) chm_sim_detach(s);
+        }
+    } detach{s};
     int rc = 0, r = 0;
     if (cmd == "get") {
         rc = print_once(s, kind);
@@ -335,7 +341,6 @@ int run(int argc, char** argv) {
     } else {
         rc = usage();
     }
-    chm_sim_detach(s);
     if (r < 0) return fail(cmd.c_str(), r);
     return rc;
 }
