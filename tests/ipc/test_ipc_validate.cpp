@@ -110,6 +110,19 @@ protected:
         img_.base = nullptr;
         IpcTest::TearDown();
     }
+    // chm_bp_validate of the file, 3,000 times or for 2 s: how many refused
+    // it, and the first refusal's text.
+    struct Checks {
+        int checks = 0, refused = 0;
+        std::string first;
+    };
+    Checks check_repeatedly() {
+        Checks c;
+        const std::uint64_t end = now_ns() + 2'000'000'000ull;
+        for (; c.checks < 3000 && now_ns() < end; ++c.checks)
+            if (chm_bp_validate(path_.c_str()) != 0 && c.refused++ == 0) c.first = chm_bp_last_error();
+        return c;
+    }
     // Attach and open every object: the first failing status, its text.
     int attach_and_open(std::string* why) {
         int r = chm_bp_attach_host(path_.c_str(), "opener", nullptr);
@@ -173,16 +186,11 @@ TEST_F(IpcValidate, ALiveQueueInUseIsNeverReportedCorrupt) {
             if (chm_msgq_try_receive(q, &got, sizeof got, nullptr) >= 0) moved.fetch_add(1);
         }
     });
-    int refused = 0;
-    std::string first;
-    const std::uint64_t end = now_ns() + 2'000'000'000ull;
-    int checks = 0;
-    for (; checks < 3000 && now_ns() < end; ++checks)
-        if (chm_bp_validate(path_.c_str()) != 0 && refused++ == 0) first = chm_bp_last_error();
+    const Checks c = check_repeatedly();
     stop.store(true);
     user.join();
     EXPECT_GT(moved.load(), 100u) << "the queue was not in use";
-    EXPECT_EQ(refused, 0) << "of " << checks << " checks; the first: " << first;
+    EXPECT_EQ(c.refused, 0) << "of " << c.checks << " checks; the first: " << c.first;
     EXPECT_EQ(chm_msgq_close(q), 0);
     EXPECT_EQ(chm_bp_leave(), 0);
 }
@@ -203,17 +211,13 @@ TEST_F(IpcValidate, ALiveSemaphoreInUseIsNeverReportedCorrupt) {
         while (!stop.load())
             if (chm_rsem_value(sem) == 0) (void)chm_rsem_v(sem);
     });
-    int refused = 0, checks = 0;
-    std::string first;
-    const std::uint64_t end = now_ns() + 2'000'000'000ull;
-    for (; checks < 3000 && now_ns() < end; ++checks)
-        if (chm_bp_validate(path_.c_str()) != 0 && refused++ == 0) first = chm_bp_last_error();
+    const Checks c = check_repeatedly();
     stop.store(true);
     (void)chm_rsem_v(sem);
     waiter.join();
     giver.join();
     EXPECT_GT(taken.load(), 100u) << "the semaphore was not in use";
-    EXPECT_EQ(refused, 0) << "of " << checks << " checks; the first: " << first;
+    EXPECT_EQ(c.refused, 0) << "of " << c.checks << " checks; the first: " << c.first;
     EXPECT_EQ(chm_rsem_close(sem), 0);
     EXPECT_EQ(chm_bp_leave(), 0);
 }
