@@ -24,6 +24,7 @@
 #include <unistd.h>
 
 #include "chimera/bp.h"
+#include "ipc/backplane/backplane.hpp"
 #include "../private_dir.hpp"
 
 namespace chm::test {
@@ -76,6 +77,19 @@ inline chm_bp_config_t small_config() {
     c.common_size = 256 * 1024;
     c.registry_capacity = 32;
     return c;
+}
+
+// A checker's report (bp::Report::emit) collected as text, a line each.
+inline void report_lines(void* ctx, const char* line) { static_cast<std::string*>(ctx)->append(line).append("\n"); }
+
+// check_backplane on this process's attachment: "" when consistent.
+inline std::string check_now() {
+    std::string out;
+    bp::Report r;
+    r.emit = report_lines;
+    r.ctx = &out;
+    bp::check_backplane(*bp::current(), r, nullptr);
+    return out;
 }
 
 class IpcTest : public ::testing::Test {

@@ -17,8 +17,6 @@
 
 namespace chm::test {
 
-inline void msgq_lines(void* ctx, const char* line) { static_cast<std::string*>(ctx)->append(line).append("\n"); }
-
 class MsgqTest : public IpcTest {
 protected:
     chm_msgq_t* make_queue(const char* name, chm_msgq_order order, std::uint32_t max_msg, std::uint32_t count,
@@ -37,7 +35,7 @@ protected:
     static std::string check(chm_msgq_t* h) {
         std::string out;
         bp::Report r;
-        r.emit = msgq_lines;
+        r.emit = report_lines;
         r.ctx = &out;
         auto* q = reinterpret_cast<ipc::msgq::QueueHeader*>(h);
         ipc::msgq::check_queue(*bp::current(), q, q->total_size, "queue", r);

@@ -17,19 +17,14 @@
 namespace chm::test {
 namespace {
 
-using IpcRaces = IpcTest;
-
-void print_lines(void* ctx, const char* line) { static_cast<std::string*>(ctx)->append(line).append("\n"); }
-
-// check_backplane on this process's attachment: "" when consistent.
-std::string check_now() {
-    std::string out;
-    bp::Report r;
-    r.emit = print_lines;
-    r.ctx = &out;
-    bp::check_backplane(*bp::current(), r, nullptr);
-    return out;
-}
+class IpcRaces : public IpcTest {
+protected:
+    // A joiner of slot 1 stops at `point`; another joins the slot and holds
+    // it; the first, let go, must find the slot taken (-EBUSY) and leave the
+    // holder's identity intact, with `recoveries` recoveries counted and the
+    // checker clean.
+    void stalled_joiner_loses(const char* point, std::uint64_t recoveries);
+};
 
 // In a forked child: stop at `point` from now on (the parent may have read
 // the environment already, so the cached verdict is dropped).
@@ -69,28 +64,24 @@ bool wait_gone(pid_t p, int timeout_ms = 5000) {
 // A join's result as one byte for a pipe.
 char join_code(int r) { return r == 0 ? 'J' : r == -EBUSY ? 'B' : r == -ETIMEDOUT ? 'T' : 'X'; }
 
-// A joiner reads the slot FREE and stalls before its CAS while another
-// process takes the slot. Layout 3 wrote the pid before the CAS: the loser
-// then overwrote the winner's pid with its own, got -EBUSY, exited, and
-// the survivors recovered the live winner's slot as dead.
-TEST_F(IpcRaces, ALoserStalledBeforeItsCasLeavesTheWinnersIdentity) {
+void IpcRaces::stalled_joiner_loses(const char* point, std::uint64_t recoveries) {
     create();
-    Pipe loser_said, winner_ready, winner_go;
-    const pid_t loser = spawn([&] {
-        stop_at("bp.take_slot.before_cas");
-        loser_said.put(join_code(chm_bp_join(path_.c_str(), 1, "loser")));
+    Pipe stalled_said, holder_ready, holder_go;
+    const pid_t stalled = spawn([&] {
+        stop_at(point);
+        stalled_said.put(join_code(chm_bp_join(path_.c_str(), 1, "stalled")));
         return 0;
     });
-    ASSERT_TRUE(wait_stopped(loser));
-    const pid_t winner = spawn([&] {
-        if (chm_bp_join(path_.c_str(), 1, "winner") != 0) return 1;
-        winner_ready.put('r');
-        return winner_go.get(30000) == 'g' && chm_bp_self() == 1 ? 0 : 2;
+    ASSERT_TRUE(wait_stopped(stalled));
+    const pid_t holder = spawn([&] {
+        if (chm_bp_join(path_.c_str(), 1, "holder") != 0) return 1;
+        holder_ready.put('r');
+        return holder_go.get(30000) == 'g' && chm_bp_self() == 1 ? 0 : 2;
     });
-    ASSERT_EQ(winner_ready.get(), 'r');
-    kill(loser, SIGCONT);
-    EXPECT_EQ(loser_said.get(), 'B');  // the slot belongs to a live process
-    EXPECT_EQ(reap(loser), 0);         // and the loser's pid is now a dead one
+    ASSERT_EQ(holder_ready.get(), 'r');
+    kill(stalled, SIGCONT);
+    EXPECT_EQ(stalled_said.get(), 'B');  // the slot belongs to a live process
+    EXPECT_EQ(reap(stalled), 0);         // and the stalled joiner's pid is now a dead one
 
     // This process's monitor recovers any slot that names a dead process.
     ASSERT_EQ(chm_bp_attach_host(path_.c_str(), "judge", nullptr), 0) << chm_bp_last_error();
@@ -98,47 +89,27 @@ TEST_F(IpcRaces, ALoserStalledBeforeItsCasLeavesTheWinnersIdentity) {
     chm_bp_status_t st;
     ASSERT_EQ(chm_bp_status(&st), 0);
     EXPECT_EQ(st.slot[1].state, CHM_BP_RUNNING);
-    EXPECT_EQ(st.slot[1].pid, winner);
-    EXPECT_STREQ(st.slot[1].name, "winner");
-    EXPECT_EQ(st.recoveries, 0u);
+    EXPECT_EQ(st.slot[1].pid, holder);
+    EXPECT_STREQ(st.slot[1].name, "holder");
+    EXPECT_EQ(st.recoveries, recoveries);
     EXPECT_EQ(check_now(), "");
-    winner_go.put('g');
-    EXPECT_EQ(reap(winner), 0);
+    holder_go.put('g');
+    EXPECT_EQ(reap(holder), 0);
+}
+
+// A joiner reads the slot FREE and stalls before its CAS while another
+// process takes the slot. Layout 3 wrote the pid before the CAS: the loser
+// then overwrote the winner's pid with its own, got -EBUSY, exited, and
+// the survivors recovered the live winner's slot as dead.
+TEST_F(IpcRaces, ALoserStalledBeforeItsCasLeavesTheWinnersIdentity) {
+    stalled_joiner_loses("bp.take_slot.before_cas", 0);
 }
 
 // The winner of the status CAS stalls before naming itself. Another
 // joiner gives it up after kConfirmMs and takes the slot; the stalled one,
 // let go, must not write its identity into the slot it lost.
 TEST_F(IpcRaces, AJoinerStalledBeforeNamingItselfIsGivenUpAndWritesNothing) {
-    create();
-    Pipe stalled_said, second_ready, second_go;
-    const pid_t stalled = spawn([&] {
-        stop_at("bp.take_slot.before_name");
-        stalled_said.put(join_code(chm_bp_join(path_.c_str(), 1, "stalled")));
-        return 0;
-    });
-    ASSERT_TRUE(wait_stopped(stalled));
-    const pid_t second = spawn([&] {
-        if (chm_bp_join(path_.c_str(), 1, "second") != 0) return 1;
-        second_ready.put('r');
-        return second_go.get(30000) == 'g' && chm_bp_self() == 1 ? 0 : 2;
-    });
-    ASSERT_EQ(second_ready.get(), 'r');
-    kill(stalled, SIGCONT);
-    EXPECT_EQ(stalled_said.get(), 'B');
-    EXPECT_EQ(reap(stalled), 0);
-
-    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), "judge", nullptr), 0) << chm_bp_last_error();
-    sleep_us(200000);
-    chm_bp_status_t st;
-    ASSERT_EQ(chm_bp_status(&st), 0);
-    EXPECT_EQ(st.slot[1].state, CHM_BP_RUNNING);
-    EXPECT_EQ(st.slot[1].pid, second);
-    EXPECT_STREQ(st.slot[1].name, "second");
-    EXPECT_EQ(st.recoveries, 1u);  // the given-up JOINING generation
-    EXPECT_EQ(check_now(), "");
-    second_go.put('g');
-    EXPECT_EQ(reap(second), 0);
+    stalled_joiner_loses("bp.take_slot.before_name", 1);  // the given-up JOINING generation
 }
 
 // A joiner killed after its status CAS, before naming itself, leaves a

@@ -19,20 +19,6 @@ namespace {
 
 using IpcRecovery = IpcTest;
 
-void print_lines(void* ctx, const char* line) {
-    static_cast<std::string*>(ctx)->append(line).append("\n");
-}
-
-// check_backplane on this process's attachment: "" when consistent.
-std::string check_now() {
-    std::string out;
-    bp::Report r;
-    r.emit = print_lines;
-    r.ctx = &out;
-    bp::check_backplane(*bp::current(), r, nullptr);
-    return out;
-}
-
 TEST_F(IpcRecovery, DeathIsDetectedAndTheSlotRecoveredQuickly) {
     create();
     ASSERT_EQ(chm_bp_attach_host(path_.c_str(), "watcher", nullptr), 0);
