@@ -117,8 +117,11 @@ inline void call_indirect_return(void (*fn)()) { fn(); }
 // the arch has one, CHM_PORT_HAS_CYCLE_COUNTER and cycle_counter() in
 // arch.hpp).
 std::uint64_t now_ns();
-// CLOCK_MONOTONIC itself, read now (and now_ns() continues from it): for
-// judging timer expiries against the clock that fired them.
+// CLOCK_MONOTONIC read now, and now_ns() continues from it: for judging
+// timer expiries against the clock that fired them. Never trails
+// CLOCK_MONOTONIC; since the thread's clock never goes back, it returns the
+// thread's last reading instead when that one ran ahead (by well under a
+// microsecond).
 std::uint64_t now_exact_ns();
 
 // ------------------------------------------------------ the interrupt mask
