@@ -128,8 +128,12 @@ CHM_CHECK int chm_servo_find(int rtpu, const char* name, chm_servo_module_t* out
  * not controlled by the caller; -ESTALE a module that no longer exists;
  * -EALREADY a module going on is ON, or going off is not ON; -EBUSY a
  * variable would have two writers (the message names it and both
- * modules); -ETIME T passed before an RTPU got the commit (nothing
- * switched); -EHOSTDOWN an RTPU is gone. */
+ * modules); -ETIME T came before every RTPU had its commit and the
+ * decision was made (nothing switched on any RTPU: the switch is all or
+ * nothing); -EBUSY also when every decision cell of the state-variable
+ * table is taken (switches whose controllers died before finishing);
+ * -EHOSTDOWN an RTPU is gone. Whatever fails, nothing has switched,
+ * except with CHM_SERVO_BEST_EFFORT for the parts left out at prepare. */
 #define CHM_SERVO_BEST_EFFORT 0x1u
 CHM_CHECK int chm_servo_switch(const chm_servo_module_t* off, size_t n_off, const chm_servo_module_t* on, size_t n_on,
                      unsigned flags, uint64_t* at_ns);

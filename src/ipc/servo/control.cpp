@@ -13,9 +13,12 @@
 #include "ipc/err/report.hpp"
 #include "kernel/err/last.hpp"
 #include "ipc/servo/servo.hpp"
+#include "ipc/svar/svar.hpp"
 #include "ipc/xmail/xmail.hpp"
 
 namespace chm::servo {
+
+namespace svar = chm::ipc::svar;
 
 namespace {
 
@@ -82,9 +85,10 @@ struct Part {  // one RTPU's share of a switch
     std::vector<SwitchItem> items;
 };
 
-int send_switch(Op op, const Part& p, std::uint64_t at, const std::vector<std::string>& names) {
+int send_switch(Op op, const Part& p, std::uint64_t at, const std::vector<std::string>& names,
+                svar::DecisionRef sw = {}, std::uint32_t outcome = 0) {
     std::vector<char> body(sizeof(SwitchReq) + p.items.size() * sizeof(SwitchItem) + names.size() * kNameLen);
-    SwitchReq q{at, std::uint32_t(p.items.size()), std::uint32_t(names.size())};
+    SwitchReq q{at, std::uint32_t(p.items.size()), std::uint32_t(names.size()), sw.cell, sw.seq, outcome, 0};
     std::memcpy(body.data(), &q, sizeof q);
     std::memcpy(body.data() + sizeof q, p.items.data(), p.items.size() * sizeof(SwitchItem));
     char* at_name = body.data() + sizeof q + p.items.size() * sizeof(SwitchItem);
@@ -174,28 +178,47 @@ int switch_impl(const chm_servo_module_t* off, size_t n_off, const chm_servo_mod
     }
     if (parts.empty()) return -EAGAIN;
     // Phase 2 at T: the first common boundary far enough ahead for every
-    // commit to land before it.
+    // commit, and the decision, to land before it. The decision cell makes
+    // it all or nothing: every part reads it at T and acts only if it was
+    // committed by then; a part that finds it still open aborts it.
+    svar::Table table;
+    svar::DecisionRef sw;
+    if (int r = svar::open_table(false, &table)) return say("chm_servo_switch: %s", chm_bp_last_error()), r;
+    if (svar::decision_open(table, table.a->token, &sw) != 0)
+        return say("chm_servo_switch: all %u decision cells of the state-variable table are taken (switches whose "
+                   "controllers died before finishing): retry later",
+                   svar::kDecisionCells),
+               -EBUSY;
     const std::uint64_t prep = now_ns() - t0;
     const std::uint64_t lead = std::max(kMinLeadNs, 4 * prep);
     const std::uint64_t now = now_ns();  // CLOCK_MONOTONIC: the RTPU kernels' clock
     const std::uint64_t at = (now + lead + common - 1) / common * common;
+    // Tell every part the outcome; the cell is given back only when all
+    // of them know it (a part that did not answer may still read it).
+    auto resolve_all = [&](std::uint32_t outcome) {
+        std::size_t told = 0;
+        for (const Part& p : parts) told += send_switch(kResolve, p, at, on_names, sw, outcome) == 0;
+        if (told == parts.size()) svar::decision_free(table, sw);
+    };
     for (std::size_t k = 0; k < parts.size(); ++k) {
-        const int r = send_switch(kCommit, parts[k], at, off_names);
+        const int r = send_switch(kCommit, parts[k], at, off_names, sw);
         if (r == 0) continue;
         char why[sizeof t_error];
         std::snprintf(why, sizeof why, "%s", t_error);
-        // Undo before T: modules armed to go on are disarmed, modules that
-        // would have been handed over take their outputs back (on every
-        // part, committed or not). After T a cancel is refused, and what
-        // was committed stands: each variable then has its new writer or
-        // its old one, never both or none.
-        int undone = 0;
-        for (std::size_t j = 0; j < parts.size(); ++j)
-            if (j != k && send_switch(kCancel, parts[j], at, on_names) == 0) ++undone;
-        if (undone == int(parts.size()) - 1) say("chm_servo_switch: %s (nothing switched)", why);
-        else say("chm_servo_switch: %s (too late to undo: the parts committed before it switched)", why);
-        return r == -ETIME ? -ETIME : r;
+        // Nothing acted yet: no part acts before T, and none will on an
+        // aborted cell. The parts armed are undone now.
+        const std::uint32_t outcome = svar::decision_settle(table, sw);
+        resolve_all(svar::kCellAborted);
+        say("chm_servo_switch: %s (nothing switched%s)", why,
+            outcome == svar::kCellAborted ? "" : "; the decision cell was not the switch's");
+        return r;
     }
+    if (!svar::decision_commit(table, sw)) {
+        resolve_all(svar::kCellAborted);
+        say("chm_servo_switch: the switch instant passed before every RTPU had its commit (nothing switched)");
+        return -ETIME;
+    }
+    resolve_all(svar::kCellCommitted);
     if (at_ns) *at_ns = at;
     return left_out ? -EAGAIN : 0;
 }

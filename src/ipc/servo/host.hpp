@@ -9,6 +9,7 @@
 
 #include "chimera/err.h"
 #include "ipc/servo/servo.hpp"
+#include "ipc/svar/svar.hpp"
 
 namespace chm::servo {
 
@@ -27,8 +28,11 @@ int clear(chm_module* m, char* why, std::size_t n);
 int kill(chm_module* m, char* why, std::size_t n);
 void status(const chm_module* m, StatusReply* out);
 
-// The switch (cycle.cpp). `items` are this RTPU's part; `displace` the
-// instance names of every module going off (any RTPU).
+namespace svar = chm::ipc::svar;
+
+// The switch (switch.cpp). `items` are this RTPU's part; `displace` the
+// instance names of every module going off (any RTPU); `sw` the switch's
+// decision cell, which its controller opened.
 struct Item {
     chm_module* m;
     bool on;
@@ -36,10 +40,29 @@ struct Item {
 };
 int prepare(const Item* items, std::uint32_t count, const char* const* displace, std::uint32_t n_displace, char* why,
             std::size_t n);
-int commit(std::uint64_t at, const Item* items, std::uint32_t count, const char* const* displace,
+// Arm this part for instant `at`, conditionally: nothing acts at T unless
+// the controller commits the cell first. Refused when the cell is no longer
+// open or T is too near.
+int commit(std::uint64_t at, svar::DecisionRef sw, const Item* items, std::uint32_t count, const char* const* displace,
            std::uint32_t n_displace, char* why, std::size_t n);
-int cancel(std::uint64_t at, const Item* items, std::uint32_t count, const char* const* displace,
-           std::uint32_t n_displace, char* why, std::size_t n);
+// The controller tells this part the outcome (svar::kCellCommitted or
+// kCellAborted). Aborted: what commit armed is undone now, where the
+// module has not reached T itself.
+int resolve(svar::DecisionRef sw, std::uint32_t outcome, const Item* items, std::uint32_t count, char* why,
+            std::size_t n);
+// A module at its first release at or after T: the outcome of switch `sw`
+// as this module knows it (in `slot`, its on_sw or off_sw), else settled
+// in the cell now (open -> aborted).
+std::uint32_t outcome_at_t(chm_module* m, chm_module::SwitchSlot& slot, svar::DecisionRef sw);
+svar::DecisionRef switch_slot_ref(const chm_module::SwitchSlot& s);
+void switch_slot_clear(chm_module::SwitchSlot& s);
+
+// The cycle task (cycle.cpp). The first multiple of `period` at or after
+// `t`; spawn the module's cycle task with first release `start`; forget a
+// cycle task that has ended (its slot freed).
+std::uint64_t grid_at_or_after(std::uint64_t t, std::uint64_t period);
+int spawn_cycle_task(chm_module* m, std::uint64_t start);
+void reap_cycle_task(chm_module* m);
 
 // Entry points in their own task (host.cpp): 0, or -ECANCELED with the
 // module's last_error saying why (returned code, error signal, fault).

@@ -121,14 +121,22 @@ int serve(const char* req, std::uint32_t len, char* rep, std::uint32_t room, std
     }
     case kPrepare:
     case kCommit:
-    case kCancel: {
+    case kResolve: {
         SwitchReq q;
         Item items[kSwitchMax];
         const char* names[kDisplaceMax];
         if ((r = decode_switch(req, len, &q, items, names, why, sizeof why)) != 0) break;
-        if (op == kPrepare) r = prepare(items, q.n, names, q.n_displace, why, sizeof why);
-        else if (op == kCommit) r = commit(q.at_ns, items, q.n, names, q.n_displace, why, sizeof why);
-        else r = cancel(q.at_ns, items, q.n, names, q.n_displace, why, sizeof why);
+        const svar::DecisionRef sw{q.cell, q.seq};
+        if (op != kPrepare && q.cell >= svar::kDecisionCells) {
+            r = -EINVAL;
+            std::snprintf(why, sizeof why, "malformed switch request: decision cell %u", q.cell);
+        } else if (op == kPrepare) {
+            r = prepare(items, q.n, names, q.n_displace, why, sizeof why);
+        } else if (op == kCommit) {
+            r = commit(q.at_ns, sw, items, q.n, names, q.n_displace, why, sizeof why);
+        } else {
+            r = resolve(sw, q.outcome, items, q.n, why, sizeof why);
+        }
         break;
     }
     case kControl: {

@@ -22,7 +22,7 @@
 namespace chm::servo {
 
 enum Op : std::uint32_t {
-    kTake = 1, kRelease, kSpawn, kFind, kPrepare, kCommit, kCancel, kControl, kClear, kKill, kStatus, kOutputs,
+    kTake = 1, kRelease, kSpawn, kFind, kPrepare, kCommit, kResolve, kControl, kClear, kKill, kStatus, kOutputs,
     kOpEnd
 };
 
@@ -54,12 +54,17 @@ struct FindReq {
     char name[kNameLen];
 };
 
-// kPrepare, kCommit, kCancel: then n Item, then n_displace names.
+// kPrepare, kCommit, kResolve: then n Item, then n_displace names
+// (prepare and commit: the modules going off; resolve: those going on).
 struct SwitchReq {
-    std::uint64_t at_ns;  // commit and cancel: T
+    std::uint64_t at_ns;  // commit and resolve: T
     std::uint32_t n;
     std::uint32_t n_displace;
+    std::uint32_t cell, seq;  // commit and resolve: the switch's decision cell (svar.hpp)
+    std::uint32_t outcome;    // resolve: svar::kCellCommitted or kCellAborted
+    std::uint32_t pad;
 };
+static_assert(sizeof(SwitchReq) == 32);
 struct SwitchItem {
     Ref ref;
     std::uint32_t on;  // 1: going on; 0: going off at T; 2: going off when its outputs are taken at T
@@ -125,6 +130,23 @@ struct chm_module {
     }
     std::uint64_t off_at() const { return off_armed.load(std::memory_order_acquire) ? off_time : 0; }
     std::uint64_t on_at = 0;                // committed first release
+    // The switch that turns this module on, and the one that turns it off
+    // (alone or handed over): its decision cell, and the outcome once known
+    // here (0 until then), from the controller's resolve or read by the
+    // module itself at T. Written by the server task before the cycle task
+    // can look (it is armed after); a module may be in both at once (on at
+    // T1, and already committed to go off at a later T2).
+    struct SwitchSlot {
+        std::atomic<std::uint32_t> cell{~0u}, seq{0}, outcome{0};
+    };
+    SwitchSlot on_sw, off_sw;
+    // A module switched on: its cycle task and a resolve (aborted) race to
+    // decide what happens to it, by CAS from kArmed.
+    enum : int { kNotArmed = 0, kArmed, kActing, kCancelled };
+    std::atomic<int> sw_arm{kNotArmed};
+    // off_time was armed by a switch (not by kill/teardown): the module
+    // stops there only if that switch was committed.
+    std::atomic<bool> off_by_switch{false};
     chm_tid_t cycle_task = CHM_TID_NONE;
     bool cycle_done = false;                // the cycle task left its loop itself
     std::atomic<bool> missed_error{false};  // a miss under CHM_SERVO_MISS_ERROR

@@ -212,7 +212,8 @@ int check_claimable_locked(const chm_svar_set* s, const char* const* displace, s
 
 // Claim every output for `s`, all or none, under the table lock; a live
 // writer named in `displace` passes its claim on.
-int claim_outputs(chm_svar_set* s, const char* const* displace, size_t n_displace, std::uint64_t since = 0) {
+int claim_outputs(chm_svar_set* s, const char* const* displace, size_t n_displace, std::uint64_t since = 0,
+                  DecisionRef sw = {}) {
     if (s->n_out == 0) return 0;
     if (int r = lock(s->table)) return r;
     if (int r = check_claimable_locked(s, displace, n_displace)) {
@@ -226,6 +227,8 @@ int claim_outputs(chm_svar_set* s, const char* const* displace, size_t n_displac
         std::memcpy(e->writer_name, s->owner, kNameLen);  // the name before the token: info reads both
         e->since_lo.store(std::uint32_t(since), Rel);
         e->since_hi.store(std::uint32_t(since >> 32), Rel);
+        e->switch_cell.store(sw.none() ? 0 : sw.cell + 1, Rel);
+        e->switch_seq.store(sw.seq, Rel);
         e->writer_id.store(s->id, Rel);
         e->writer_token.store(s->a->token, Rel);
     }
@@ -310,6 +313,56 @@ bool chm::ipc::svar::set_alive(std::uint32_t id) {
     const chm_svar_set* s = listed(id);
     return s && s->claims_held.load(Acq);
 }
+
+namespace chm::ipc::svar {
+
+const Table& set_table(const chm_svar_set* s) { return s->table; }
+
+int set_claim_for_switch(chm_svar_set* s, const char* const* displace, std::size_t n_displace, std::uint64_t since,
+                         DecisionRef r) {
+    return claim_outputs(s, displace, n_displace, since, r);
+}
+
+int set_displaced_by(const chm_svar_set* s, std::uint64_t release, DecisionRef* by) {
+    if (!s->claims_held.load(std::memory_order_relaxed)) return 0;
+    for (std::uint32_t k = 0; k < s->n_out; ++k) {
+        const Entry* e = s->vars[s->n_in + k].e;
+        if (holds(s, e)) continue;
+        // Taken: by whom, since when and on which switch's decision is
+        // written before the token.
+        const std::uint64_t since = std::uint64_t(e->since_hi.load(Acq)) << 32 | e->since_lo.load(Acq);
+        if (since > release) continue;
+        const std::uint32_t cell = e->switch_cell.load(Acq);
+        *by = cell ? DecisionRef{cell - 1, e->switch_seq.load(Acq)} : DecisionRef{};
+        return 1;
+    }
+    return 0;
+}
+
+int set_reclaim_after_abort(chm_svar_set* s, DecisionRef r) {
+    if (s->n_out == 0) return 0;
+    if (int err = lock(s->table)) return err;
+    bp::lock_mark_dirty(&s->table.hdr()->lock);
+    for (std::uint32_t k = 0; k < s->n_out; ++k) {
+        Entry* e = outputs(s)[k].e;
+        if (holds(s, e)) continue;
+        const bool by_r = e->switch_cell.load(Acq) == r.cell + 1 && e->switch_seq.load(Acq) == r.seq;
+        if (!by_r && claim_live(s->table, e)) continue;  // another writer's, by a later claim: not ours to take
+        std::memcpy(e->writer_name, s->owner, kNameLen);
+        e->since_lo.store(0, Rel);
+        e->since_hi.store(0, Rel);
+        e->switch_cell.store(0, Rel);
+        e->switch_seq.store(0, Rel);
+        e->writer_id.store(s->id, Rel);
+        e->writer_token.store(s->a->token, Rel);
+    }
+    bp::lock_clear_dirty(&s->table.hdr()->lock);
+    s->claims_held.store(true);
+    unlock(s->table);
+    return 0;
+}
+
+}  // namespace chm::ipc::svar
 
 extern "C" {
 

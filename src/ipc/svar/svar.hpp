@@ -4,7 +4,10 @@
 // The table is one registry object of kind kKindStateVars named
 // kTableName, in common memory, created by the first declaration:
 //
-//   TableHeader | Entry[capacity] | value buffers (data area)
+//   TableHeader | Entry[capacity] | Cell[kDecisionCells] | value buffers
+//
+// The decision cells belong to servo switches (one per switch under way,
+// see "Decision cells" below).
 //
 // Entries are appended under the table lock and never removed: entry i is
 // published by count becoming > i (release), and from then on only its
@@ -28,13 +31,15 @@
 
 #include "ipc/backplane/backplane.hpp"
 
+struct chm_svar_set;  // set.cpp (chimera/svar.h: chm_svar_set_t)
+
 namespace chm::ipc::svar {
 
 using bp::A32;
 
 inline constexpr char kTableName[] = "chimera.svar";
 inline constexpr std::uint32_t kTableMagic = 0x53564152;  // "SVAR"
-inline constexpr std::uint32_t kTableVersion = 2;  // 2: the claim's hand-over instant
+inline constexpr std::uint32_t kTableVersion = 3;  // 2: the claim's hand-over instant; 3: decision cells
 inline constexpr std::uint32_t kNameLen = 32;  // name and writer name, NUL included
 inline constexpr std::uint32_t kUnitLen = 16;
 inline constexpr std::uint32_t kElemsMax = 65536;
@@ -73,14 +78,36 @@ struct Entry {
     // in two words written before the token: the writer it displaced
     // writes the cycles released before it and stops at the first after.
     A32 since_lo, since_hi;
-    std::uint32_t reserved[6];
+    // The switch whose decision the claim waits on (written before the
+    // token, with since): cell index + 1 (0: none) and its sequence. The
+    // writer it displaces stops at T only if that switch was committed.
+    A32 switch_cell, switch_seq;
+    std::uint32_t reserved[4];
+};
+
+// Decision cells. A switch of modules across RTPUs takes one cell (OPEN)
+// before its commits; every party reads it at T, the first instant the
+// switch acts, and none acts unless the controller made it COMMITTED first:
+// a party that finds it OPEN at T makes it ABORTED (one CAS decides who
+// wins), so either every part switches or none. word = seq << 2 | state;
+// the sequence grows with each use, so a stale reference never reads a
+// later switch's outcome.
+inline constexpr std::uint32_t kDecisionCells = 64;
+enum : std::uint32_t { kCellFree = 0, kCellOpen = 1, kCellCommitted = 2, kCellAborted = 3 };
+struct Cell {
+    A32 word;
+    A32 owner;  // the backplane token of the controller that opened it
 };
 
 static_assert(bp::kShared<TableHeader> && sizeof(TableHeader) == 64);
 static_assert(bp::kShared<Entry> && sizeof(Entry) == 160);
 static_assert(offsetof(Entry, name) == 48);
+static_assert(bp::kShared<Cell> && sizeof(Cell) == 8);
 
-inline constexpr std::uint32_t kTableBytesMin = sizeof(TableHeader) + sizeof(Entry);
+inline constexpr std::uint32_t kTableBytesMin = sizeof(TableHeader) + sizeof(Entry) + kDecisionCells * sizeof(Cell);
+inline std::uint64_t cells_offset(std::uint32_t capacity) {
+    return sizeof(TableHeader) + std::uint64_t(capacity) * sizeof(Entry);
+}
 
 std::uint32_t elem_size(std::uint32_t type);  // 0 for an unknown type
 inline std::uint32_t round16(std::uint32_t n) { return (n + 15u) & ~15u; }
@@ -97,6 +124,15 @@ struct Table {
     Entry* entry(std::uint32_t i) const {
         return reinterpret_cast<Entry*>(base + sizeof(TableHeader)) + i;
     }
+    Cell* cell(std::uint32_t i) const { return reinterpret_cast<Cell*>(base + cells_offset(capacity)) + i; }
+};
+
+// A switch's decision cell as its parties name it; cell kNoCell: none.
+inline constexpr std::uint32_t kNoCell = ~0u;
+struct DecisionRef {
+    std::uint32_t cell = kNoCell, seq = 0;
+    bool none() const { return cell == kNoCell; }
+    bool operator==(const DecisionRef&) const = default;
 };
 
 // An entry's immutable fields as validated (what a set keeps).
@@ -133,12 +169,43 @@ void repair_locked(const Table& t);
 int read_value(const Entry* e, const char* buf0, std::uint32_t stride, std::uint32_t bytes, void* dst);
 void write_value(Entry* e, char* buf0, std::uint32_t stride, std::uint32_t bytes, const void* src);
 
+// Decision cells (decision.cpp). Open a FREE cell for a switch by the
+// process of token `owner`: 0, or -EBUSY when every cell is taken.
+int decision_open(const Table& t, std::uint32_t owner, DecisionRef* out);
+// The state of `r`'s switch: kCellOpen, kCellCommitted, kCellAborted, or
+// kCellFree when the cell no longer holds it (freed, reused, or `r` names
+// no cell of the table).
+std::uint32_t decision_peek(const Table& t, DecisionRef r);
+// The controller, once every commit was acknowledged: OPEN -> COMMITTED.
+// True if it did; false when a party reached T first and aborted.
+bool decision_commit(const Table& t, DecisionRef r);
+// Any party: settle the outcome now, OPEN -> ABORTED. The state after
+// (kCellCommitted, kCellAborted), or kCellFree as for decision_peek.
+std::uint32_t decision_settle(const Table& t, DecisionRef r);
+// Give the cell back (every party knows the outcome); a no-op when it no
+// longer holds `r`'s switch.
+void decision_free(const Table& t, DecisionRef r);
+
 // Is entry `e`'s writer claim held by a live writer? A claim of this
 // process is live while the set it names exists (set.cpp); another
 // process's while that process is.
 bool claim_live(const Table& t, const Entry* e);
 // set.cpp: is `id` one of this process's live sets?
 bool set_alive(std::uint32_t id);
+
+// set.cpp, for servo switches. The table a set reads.
+const Table& set_table(const chm_svar_set* s);
+// Claim every output from instant `since`, waiting on switch `r`'s
+// decision (chm_svar_set_claim_at otherwise). 0 or as chm_svar_set_claim.
+int set_claim_for_switch(chm_svar_set* s, const char* const* displace, std::size_t n_displace, std::uint64_t since,
+                         DecisionRef r);
+// Has an output of `s` been taken with an instant at or before `release`
+// (chm_svar_set_displaced)? Then 1, and `*by` names the switch the claim
+// waits on (none for a plain claim).
+int set_displaced_by(const chm_svar_set* s, std::uint64_t release, DecisionRef* by);
+// Switch `r` was aborted: take back every output of `s` that its claim
+// took (or that is free), under the table lock. 0, or as chm_svar_set_claim.
+int set_reclaim_after_abort(chm_svar_set* s, DecisionRef r);
 
 }  // namespace chm::ipc::svar
 // Its backplane hooks (svar_check, svar_validate, svar_recover) are

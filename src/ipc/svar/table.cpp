@@ -24,7 +24,7 @@ int init_table(char* base, std::uint32_t size, std::uint32_t capacity) {
     auto* h = reinterpret_cast<TableHeader*>(base);
     std::memset(base, 0, size);
     h->capacity = capacity;
-    h->data_offset = round16(std::uint32_t(sizeof(TableHeader) + capacity * sizeof(Entry)));
+    h->data_offset = round16(std::uint32_t(cells_offset(capacity) + kDecisionCells * sizeof(Cell)));
     h->data_size = (size - h->data_offset) & ~15u;
     h->version = kTableVersion;
     std::atomic_thread_fence(Rel);
@@ -39,7 +39,7 @@ std::uint32_t table_bytes(const bp::View& v, std::uint32_t* capacity) {
     const std::uint32_t half = (v.geo().common_size / 2) & ~4095u;
     std::uint32_t data = std::min<std::uint32_t>(CHM_SVAR_DATA_BYTES, half);
     *capacity = CHM_SVAR_CAPACITY;
-    const std::uint32_t entries = round16(sizeof(TableHeader) + *capacity * sizeof(Entry));
+    const std::uint32_t entries = round16(std::uint32_t(cells_offset(*capacity) + kDecisionCells * sizeof(Cell)));
     if (data < entries + 4096) data = entries + 4096;  // at least a page of values
     return entries + data;
 }
@@ -62,7 +62,7 @@ int validate_header(const char* base, std::uint32_t size, char* why, std::size_t
     if (h->magic != kTableMagic) return bp::corrupt(why, n, "state-variable table: magic 0x%08x", h->magic);
     if (h->version != kTableVersion)
         return bp::corrupt(why, n, "state-variable table: version %u, this build reads %u", h->version, kTableVersion);
-    const std::uint64_t entries_end = sizeof(TableHeader) + std::uint64_t(h->capacity) * sizeof(Entry);
+    const std::uint64_t entries_end = cells_offset(h->capacity) + kDecisionCells * sizeof(Cell);
     if (h->capacity == 0 || entries_end > size)
         return bp::corrupt(why, n, "state-variable table: capacity %u does not fit in %u bytes", h->capacity, size);
     if (h->data_offset < entries_end || h->data_offset % 16 || h->data_offset > size ||

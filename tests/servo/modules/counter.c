@@ -1,4 +1,5 @@
-/* A test module: writes state variable "v" = k * 1000 + id every cycle,
+/* A test module: writes state variable "v" (COUNTER_OUTPUT when built as
+ * a variant) = k * 1000 + id every cycle,
  * where k is the cycle's index on the shared grid (release / period), and
  * appends k to the log segment "log.<instance>" the test created, so the
  * test can tell which module ran which cycle. */
@@ -20,12 +21,15 @@ typedef struct {
     int on_calls, off_calls;
 } state_t;
 
-static const char* const outputs[] = {"v"};
+#ifndef COUNTER_OUTPUT
+#define COUNTER_OUTPUT "v"
+#endif
+static const char* const outputs[] = {COUNTER_OUTPUT};
 static const chm_module_param_t params[] = {{"id", 1, 1, 100, NULL}};
 
 static int init(chm_module_t* m) {
     state_t* s = chm_module_state(m);
-    s->v = chm_module_var(m, "v");
+    s->v = chm_module_var(m, COUNTER_OUTPUT);
     char name[48];
     snprintf(name, sizeof name, "log.%s", chm_module_name(m));
     void* p = NULL;

@@ -1,0 +1,69 @@
+// Decision cells of servo switches (svar.hpp, "Decision cells"): taken by
+// a controller, settled by one CAS by whoever comes first — the controller
+// committing once every RTPU acknowledged, or any party aborting when T
+// arrives and the cell is still open — and given back by the controller.
+#include <cerrno>
+
+#include "ipc/svar/svar.hpp"
+
+namespace chm::ipc::svar {
+
+namespace {
+constexpr auto Acq = std::memory_order_acquire;
+constexpr auto AcqRel = std::memory_order_acq_rel;
+constexpr std::uint32_t kSeqMask = 0x3fffffffu;
+
+std::uint32_t state_of(std::uint32_t w) { return w & 3u; }
+std::uint32_t seq_of(std::uint32_t w) { return w >> 2; }
+std::uint32_t word(std::uint32_t seq, std::uint32_t state) { return (seq & kSeqMask) << 2 | state; }
+
+// The cell `r` names, if it is one of the table's (the reference may come
+// from a request or a table entry: neither is believed unchecked).
+Cell* cell_of(const Table& t, DecisionRef r) { return r.cell < kDecisionCells ? t.cell(r.cell) : nullptr; }
+}  // namespace
+
+int decision_open(const Table& t, std::uint32_t owner, DecisionRef* out) {
+    for (std::uint32_t i = 0; i < kDecisionCells; ++i) {
+        Cell* c = t.cell(i);
+        std::uint32_t w = c->word.load(Acq);
+        if (state_of(w) != kCellFree) continue;
+        const std::uint32_t seq = (seq_of(w) + 1) & kSeqMask ? (seq_of(w) + 1) & kSeqMask : 1;
+        if (!c->word.compare_exchange_strong(w, word(seq, kCellOpen), AcqRel)) continue;
+        c->owner.store(owner, std::memory_order_release);
+        *out = DecisionRef{i, seq};
+        return 0;
+    }
+    return -EBUSY;
+}
+
+std::uint32_t decision_peek(const Table& t, DecisionRef r) {
+    const Cell* c = cell_of(t, r);
+    if (!c) return kCellFree;
+    const std::uint32_t w = c->word.load(Acq);
+    return seq_of(w) == r.seq ? state_of(w) : kCellFree;
+}
+
+bool decision_commit(const Table& t, DecisionRef r) {
+    Cell* c = cell_of(t, r);
+    std::uint32_t w = word(r.seq, kCellOpen);
+    return c && c->word.compare_exchange_strong(w, word(r.seq, kCellCommitted), AcqRel);
+}
+
+std::uint32_t decision_settle(const Table& t, DecisionRef r) {
+    Cell* c = cell_of(t, r);
+    if (!c) return kCellFree;
+    std::uint32_t w = word(r.seq, kCellOpen);
+    if (c->word.compare_exchange_strong(w, word(r.seq, kCellAborted), AcqRel)) return kCellAborted;
+    // Not open: w holds what the cell says now.
+    return seq_of(w) == r.seq && state_of(w) != kCellFree ? state_of(w) : kCellFree;
+}
+
+void decision_free(const Table& t, DecisionRef r) {
+    Cell* c = cell_of(t, r);
+    if (!c) return;
+    std::uint32_t w = c->word.load(Acq);
+    while (seq_of(w) == r.seq && state_of(w) >= kCellCommitted)  // an open switch is never freed
+        if (c->word.compare_exchange_weak(w, word(r.seq, kCellFree), AcqRel)) return;
+}
+
+}  // namespace chm::ipc::svar

@@ -1,0 +1,122 @@
+// A switch is all or nothing: one RTPU held between its prepare and its
+// commit until the switch's instant T has passed (a named stop point,
+// CHIMERA_STOP_AT) makes the whole switch not happen, on every RTPU,
+// although another RTPU had its commit in time. Every module keeps its
+// state and every variable its writer for every cycle, and the same
+// switch done afterwards happens everywhere.
+#include <gtest/gtest.h>
+
+#include <signal.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cstdlib>
+#include <fstream>
+#include <iterator>
+#include <set>
+#include <string>
+#include <thread>
+
+#include "chimera/chimera.h"
+#include "servo_fixture.hpp"
+
+using namespace chm::test;
+
+namespace {
+
+// Is process p stopped (state T in /proc/p/stat)?
+bool stopped(pid_t p) {
+    std::ifstream f("/proc/" + std::to_string(p) + "/stat");
+    std::string s((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    const auto k = s.rfind(')');
+    return k != std::string::npos && k + 2 < s.size() && s[k + 2] == 'T';
+}
+
+// Every cycle index of [from, to) in the log, none twice.
+::testing::AssertionResult ran_every_cycle(const CycleLog* log, std::uint64_t from, std::uint64_t to) {
+    std::set<std::uint64_t> ks(log->k, log->k + std::min<std::uint32_t>(log->count, kLogMax));
+    if (ks.size() != log->count) return ::testing::AssertionFailure() << "a cycle ran twice";
+    for (std::uint64_t k = from; k < to; ++k)
+        if (!ks.count(k)) return ::testing::AssertionFailure() << "cycle " << k << " did not run (of " << from << ".." << to << ")";
+    return ::testing::AssertionSuccess();
+}
+
+TEST_F(Servo, ASwitchOneRtpuCannotCommitInTimeSwitchesNothingAnywhere) {
+    // RTPU 3 stops itself the first time it enters a commit.
+    ::setenv("CHIMERA_STOP_AT", "servo.commit.begin", 1);
+    const pid_t p3 = start_rtpu(3);
+    ::unsetenv("CHIMERA_STOP_AT");
+    ASSERT_TRUE(wait_serving(3, p3)) << read_file(err_of(3));
+    ASSERT_EQ(chm_servo_take(1u << 3), 0) << chm_servo_last_error();
+    declare("w", CHM_SVAR_DOUBLE);
+    CycleLog* log_c1 = make_log("c1");
+    CycleLog* log_d1 = make_log("d1");
+    CycleLog* log_a1 = make_log("a1");
+    CycleLog* log_c3 = make_log("c3");
+    // RTPU 1: c1 writes v and d1 writes f, both on; a1 (writes w) off.
+    // RTPU 3: c3 (writes v) off. The switch: c1 and d1 off, c3 and a1 on;
+    // RTPU 1's part (c1 handed over to c3, d1 off alone, a1 on) commits
+    // first, then RTPU 3 stops in its commit.
+    const std::uint64_t period = 2 * kMs;
+    chm_servo_module_t c1, d1, a1, c3;
+    ASSERT_EQ(spawn(1, COUNTER_SO, "c1", period, &c1, {{"id", 1}}), 0) << chm_servo_last_error();
+    ASSERT_EQ(spawn(1, COUNTER_F_SO, "d1", period, &d1, {{"id", 2}}), 0) << chm_servo_last_error();
+    ASSERT_EQ(spawn(1, COUNTER_W_SO, "a1", period, &a1, {{"id", 3}}), 0) << chm_servo_last_error();
+    ASSERT_EQ(spawn(3, COUNTER_SO, "c3", period, &c3, {{"id", 4}}), 0) << chm_servo_last_error();
+    const chm_servo_module_t first_on[] = {c1, d1};
+    std::uint64_t started = 0;
+    ASSERT_EQ(chm_servo_switch(nullptr, 0, first_on, 2, 0, &started), 0) << chm_servo_last_error();
+
+    // Let RTPU 3 go on well after T: T is a few ms after the prepares.
+    std::atomic<bool> held{false};
+    std::thread release([&] {
+        const std::uint64_t end = now_ms() + 20000;
+        while (!stopped(p3) && now_ms() < end) nap_ms(1);
+        held = stopped(p3);
+        nap_ms(300);
+        kill(p3, SIGCONT);
+    });
+    const chm_servo_module_t off[] = {c1, d1}, on[] = {c3, a1};
+    const std::uint64_t called = now_ms();
+    std::uint64_t at = 0;
+    const int r = chm_servo_switch(off, 2, on, 2, 0, &at);
+    const std::string why = chm_servo_last_error();
+    release.join();
+    ASSERT_TRUE(held) << "RTPU 3 never stopped at servo.commit.begin";
+    EXPECT_EQ(r, -ETIME) << why;
+    EXPECT_NE(why.find("nothing switched"), std::string::npos) << why;
+    EXPECT_EQ(at, 0u) << "no instant is reported for a switch that did not happen";
+
+    // Every module as before: the committed part on RTPU 1 did not act.
+    nap_ms(20);
+    EXPECT_EQ(status(c1).state, CHM_SERVO_ON);
+    EXPECT_EQ(status(d1).state, CHM_SERVO_ON);
+    EXPECT_EQ(status(a1).state, CHM_SERVO_OFF);
+    EXPECT_EQ(status(c3).state, CHM_SERVO_OFF);
+    EXPECT_EQ(log_a1->count, 0u) << "a1 ran cycles of a switch that did not happen";
+    EXPECT_EQ(log_c3->count, 0u) << "c3 ran cycles of a switch that did not happen";
+    // c1 and d1 ran every cycle from their start to now, through T.
+    const std::uint64_t k0 = started / period;
+    const std::uint64_t k_now = chm_time_now() / period;
+    EXPECT_TRUE(ran_every_cycle(log_c1, k0, k_now - 2));
+    EXPECT_TRUE(ran_every_cycle(log_d1, k0, k_now - 2));
+    EXPECT_EQ(std::fmod(get("v"), 1000.0), 1.0) << "v is still c1's";
+    std::fprintf(stderr, "switch refused after %llu ms: %s\n", (unsigned long long)(now_ms() - called), why.c_str());
+
+    // The same switch now (RTPU 3 stops only once) happens everywhere, at
+    // one instant: each variable's writers meet there, without a gap.
+    ASSERT_EQ(chm_servo_switch(off, 2, on, 2, 0, &at), 0) << chm_servo_last_error();
+    EXPECT_TRUE(wait_state(c1, CHM_SERVO_OFF));
+    EXPECT_TRUE(wait_state(d1, CHM_SERVO_OFF));
+    EXPECT_EQ(status(c3).state, CHM_SERVO_ON);
+    EXPECT_EQ(status(a1).state, CHM_SERVO_ON);
+    nap_ms(20);
+    const std::uint64_t kt = at / period;
+    EXPECT_TRUE(ran_every_cycle(log_c1, k0, kt));
+    EXPECT_EQ(*std::max_element(log_c1->k, log_c1->k + log_c1->count), kt - 1) << "c1 stopped at T";
+    EXPECT_EQ(*std::max_element(log_d1->k, log_d1->k + log_d1->count), kt - 1) << "d1 stopped at T";
+    EXPECT_EQ(*std::min_element(log_c3->k, log_c3->k + log_c3->count), kt) << "c3 started at T";
+    EXPECT_EQ(*std::min_element(log_a1->k, log_a1->k + log_a1->count), kt) << "a1 started at T";
+}
+
+}  // namespace
