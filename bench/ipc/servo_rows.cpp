@@ -4,13 +4,16 @@
 //  * module_cycle_cpu: CPU time of one cycle of an empty module at 1 kHz
 //    (copy-in of one double, the call, copy-out of one double, the
 //    framework's checks) beside a bare periodic task's cycle at 1 kHz on
-//    the same RTPU (peer_task_cycle_cpu), each alone in turn: the kernel's
-//    per-task CPU accounting read every 50 ms; the figure is the median
-//    over those windows of each window's CPU per cycle. (Measured at once
-//    over a whole run, the two swung 1.35x to 8.3x between rounds: a mean
-//    took a host stall's millisecond into one task's account, and which
-//    of two tasks released together paid for re-arming the timer changed
-//    from run to run.)
+//    the same RTPU (peer_task_cycle_cpu), each alone, in alternating
+//    blocks of 5 windows (module first, then bare, then bare first...):
+//    the kernel's per-task CPU accounting read every 50 ms; the figure is
+//    the median over all windows of each window's CPU per cycle. (Measured
+//    at once over a whole run, the two swung 1.35x to 8.3x between rounds:
+//    a mean took a host stall's millisecond into one task's account, and
+//    which of two tasks released together paid for re-arming the timer
+//    changed from run to run. Measured one after the other, a round's
+//    ratio still moved from 1.6 to 2.9 with the host's state between the
+//    two halves: interleaving gives both the same states.)
 //  * servo_switch_4_modules_periods: a switch of 4 modules on 2 RTPUs (two
 //    off, two on, each handing a variable over), from the call to the
 //    instant it takes effect, in periods of the slowest module (target <=
@@ -104,8 +107,8 @@ struct Windows {
     std::uint64_t cycles = 0;
     double median() const { return cpu[cpu.size() / 2]; }
 };
-Windows cpu_per_cycle_windows(int rtpu, const char* name, int windows, useconds_t window_us) {
-    Windows w;
+// Add `windows` windows of task `name` to `w` (kept sorted).
+void cpu_per_cycle_windows(Windows& w, int rtpu, const char* name, int windows, useconds_t window_us) {
     Counters c0;
     if (!counters(rtpu, name, &c0)) throw std::runtime_error(std::string("no task ") + name);
     for (int i = 0; i < windows; ++i) {
@@ -119,7 +122,17 @@ Windows cpu_per_cycle_windows(int rtpu, const char* name, int windows, useconds_
     }
     if (w.cpu.empty()) throw std::runtime_error(std::string(name) + " ran no cycle");
     std::sort(w.cpu.begin(), w.cpu.end());
-    return w;
+}
+
+// Switch module m on (or off), retrying while its last cycle finishes.
+void switch_one(chm_servo_module_t m, bool on) {
+    for (int k = 0;; ++k) {
+        const int r = on ? chm_servo_on(m) : chm_servo_off(m);
+        if (r == 0) return;
+        if ((r != -EALREADY && r != -ETIME) || k == 2000) check(r, on ? "chm_servo_on" : "chm_servo_off");
+        usleep(1000);
+        if (const char* why = abort_reason()) throw std::runtime_error(why);
+    }
 }
 
 void servo_rows(Session& s) {
@@ -147,26 +160,37 @@ void servo_rows(Session& s) {
 
     // The cycle's CPU, beside a bare periodic task's.
     {
-        const int windows = s.quick() ? 4 : 20;
+        const int blocks = s.quick() ? 2 : 4, per_block = s.quick() ? 2 : 5;
         chm_servo_module_t m = spawn(1, MODULE1_SO, "empty", kMs);
-        check(chm_servo_on(m), "chm_servo_on");
-        usleep(50'000);  // under way
-        const Windows mod = cpu_per_cycle_windows(1, "empty", windows, 50'000);
+        Windows mod, peer;
+        auto measure_module = [&] {
+            switch_one(m, true);
+            usleep(50'000);  // under way
+            cpu_per_cycle_windows(mod, 1, "empty", per_block, 50'000);
+            switch_one(m, false);
+        };
+        auto measure_bare = [&] {
+            chm_tid_t bare;
+            check(chm_rtpu_spawn(1, MODULE1_SO, 0, nullptr, &bare), "chm_rtpu_spawn");
+            usleep(50'000);
+            cpu_per_cycle_windows(peer, 1, "bare", per_block, 50'000);
+            (void)chm_rtpu_destroy(1, bare);
+        };
+        for (int b = 0; b < blocks; ++b) {
+            if (b % 2 == 0) measure_module(), measure_bare();
+            else measure_bare(), measure_module();
+        }
         check(chm_servo_kill(m), "chm_servo_kill");
-        chm_tid_t bare;
-        check(chm_rtpu_spawn(1, MODULE1_SO, 0, nullptr, &bare), "chm_rtpu_spawn");
-        usleep(50'000);
-        const Windows peer = cpu_per_cycle_windows(1, "bare", windows, 50'000);
-        (void)chm_rtpu_destroy(1, bare);
         char cfg[300];
         std::snprintf(cfg, sizeof cfg,
                       "chimera-rtpu defaults (MUF), RTPU 1, 1 kHz, one input and one output double, alone; kernel "
-                      "CPU accounting read every 50 ms: median of %zu windows' CPU per cycle (%llu cycles)",
-                      mod.cpu.size(), (unsigned long long)mod.cycles);
+                      "CPU accounting read every 50 ms: median of %zu windows' CPU per cycle (%llu cycles), in "
+                      "%d blocks alternating with the bare task's",
+                      mod.cpu.size(), (unsigned long long)mod.cycles, blocks);
         s.emit("module_cycle_cpu", cfg, mod.median(), mod.cpu.front(), mod.cpu.back());
         std::snprintf(cfg, sizeof cfg,
-                      "a periodic task at 1 kHz that does nothing, same RTPU, alone, right after the module; "
-                      "measured the same way (%llu cycles)",
+                      "a periodic task at 1 kHz that does nothing, same RTPU, alone, in blocks alternating with "
+                      "the module's; measured the same way (%llu cycles)",
                       (unsigned long long)peer.cycles);
         s.emit("peer_task_cycle_cpu", cfg, peer.median(), peer.cpu.front(), peer.cpu.back());
     }
