@@ -151,7 +151,9 @@ protected:
             ASSERT_EQ(chm_svar_info(name.c_str(), &i), 0) << name;
             EXPECT_EQ(i.writes, v.writes) << name;
             ASSERT_EQ(i.has_writer, v.writer >= 0) << name;
-            if (v.writer >= 0) EXPECT_EQ(sets[v.writer].owner, i.writer) << name;
+            if (v.writer >= 0) {
+                EXPECT_EQ(sets[v.writer].owner, i.writer) << name;
+            }
             std::vector<unsigned char> got(v.value.size() + 1);
             ASSERT_EQ(chm_svar_get(name.c_str(), got.data(), got.size()), 0) << name;
             got.pop_back();

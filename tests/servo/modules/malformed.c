@@ -2,7 +2,9 @@
  * ABI, 2 no cycle entry, 3 an input that is not declared. */
 #include <chimera/module.h>
 
+#if MALFORMED == 3
 static const char* const inputs[] = {"not_declared"};
+#endif
 static int ok(chm_module_t* m) { (void)m; return 0; }
 
 const chm_module_desc_t chm_module = {
