@@ -6,9 +6,13 @@ BUILD       ?= build
 BUILD_BENCH ?= build-release
 BUILD_FUZZ  ?= build-fuzz
 BUILD_ASAN  ?= build-asan
+BUILD_TSAN  ?= build-tsan
 # The suites make test-asan runs under AddressSanitizer + UBSan. The others
-# say in their meson.build why they cannot (rtpu, host, bench).
-ASAN_SUITES = kernel port ipc svar servo config matrix devices errors
+# say in their meson.build why they cannot (rtpu, bench).
+ASAN_SUITES = kernel port ipc svar servo config matrix devices errors host
+# ThreadSanitizer: the backplane and the host library between real threads
+# and processes (tests/ipc/meson.build says which cases it leaves out, why).
+TSAN_SUITES = ipc host
 FUZZ_SECONDS ?= 300
 MESON_TEST  ?= meson test --print-errorlogs --num-processes 2
 
@@ -23,7 +27,7 @@ PKGS_FUZZ  = clang libclang-rt-14-dev
 FUZZ_TARGETS = fuzz_backplane fuzz_msgq fuzz_xmail fuzz_args fuzz_config fuzz_servo fuzz_cmdi fuzz_host
 
 .PHONY: all deps deps-cross deps-bench deps-fuzz build demo demo-loop demo-multi stress test test-native test-m68k \
-        test-aarch64 test-fuzz test-asan fuzz fuzz-seeds bench clean
+        test-aarch64 test-fuzz test-asan test-tsan fuzz fuzz-seeds bench clean
 
 all: build
 
@@ -64,7 +68,7 @@ demo-loop: build
 demo-multi: build
 	@sh examples/multi/demo.sh $(BUILD)
 
-test: test-native test-m68k test-aarch64 test-fuzz test-asan
+test: test-native test-m68k test-aarch64 test-fuzz test-asan test-tsan
 
 # The core suites again with AddressSanitizer and UndefinedBehaviorSanitizer
 # (the kernel tells them of every stack switch: src/kernel/core/fiber_asan.hpp);
@@ -82,6 +86,17 @@ test-asan: deps $(BUILD_ASAN)/build.ninja
 	@# error reports may follow"): here it fails.
 	@! grep -m3 'WARNING: ASan' $(BUILD_ASAN)/meson-logs/testlog.txt || \
 	    (echo 'test-asan: AddressSanitizer was not told of a stack switch (above)'; exit 1)
+
+# The backplane and host suites again with ThreadSanitizer (gcc's): any
+# report fails the test (exit status 66). Only what they need is built.
+$(BUILD_TSAN)/build.ninja:
+	meson setup $(BUILD_TSAN) -Db_sanitize=thread -Db_lundef=false
+
+test-tsan: deps $(BUILD_TSAN)/build.ninja
+	ninja -C $(BUILD_TSAN) build.ninja
+	ninja -C $(BUILD_TSAN) $$(python3 tools/check/suite_targets.py $(BUILD_TSAN) $(TSAN_SUITES))
+	TSAN_OPTIONS=halt_on_error=1 $(MESON_TEST) -C $(BUILD_TSAN) --no-rebuild \
+	    $(foreach s,$(TSAN_SUITES),--suite $(s))
 
 # The kill-at-a-named-point tests with 2000 kills per point, not 100, and
 # the differential scheduler test with 20,000 sets per policy, random seed.
@@ -146,4 +161,4 @@ bench: deps-bench $(BUILD_BENCH)/build.ninja
 	/usr/bin/python3 bench/run.py --build $(BUILD_BENCH) $(if $(QUICK),--quick,)
 
 clean:
-	rm -rf $(BUILD) $(BUILD_BENCH) $(BUILD_FUZZ) build-m68k build-aarch64
+	rm -rf $(BUILD) $(BUILD_BENCH) $(BUILD_FUZZ) $(BUILD_ASAN) $(BUILD_TSAN) build-m68k build-aarch64

@@ -383,7 +383,7 @@ TEST_F(HostTest, AStopIsNotHeldByAStuckHostCall) {
     while ((r = waitpid(server_, &st, WNOHANG)) == 0 && now_ms() < end) nap_ms(20);
     ASSERT_EQ(r, server_) << "the host server did not stop; " << read_file(err_of(0));
     std::printf("stopped %llu ms after SIGTERM\n", static_cast<unsigned long long>(now_ms() + 8000 - end));
-    EXPECT_TRUE(WIFEXITED(st) && WEXITSTATUS(st) == 0) << st;
+    EXPECT_TRUE(WIFEXITED(st) && WEXITSTATUS(st) == 0) << st << " " << read_file(err_of(0));
     EXPECT_NE(read_file(err_of(0)).find("still in the host's calls at stop"), std::string::npos) << read_file(err_of(0));
     ASSERT_TRUE(wait_text(probe_out(), "block error", 10000)) << read_file(probe_out());
     EXPECT_NE(read_file(probe_out()).find("host server"), std::string::npos) << read_file(probe_out());

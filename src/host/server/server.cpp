@@ -484,9 +484,11 @@ void stop() {
         std::fprintf(stderr, "chimera-rtpu: host server: %d request(s) still in the host's calls at stop: left\n",
                      g->working.load());
         for (std::thread& t : g->workers) t.detach();
-        // g stays, not freed: those workers still use it, until the
-        // process ends. Their host calls fail once the root is closed.
-        fs_fini();
+        // g and the root stay, neither freed nor closed: those workers
+        // still use them until the process ends (no request reaches them
+        // any more). Closing the root under a worker would race with its
+        // use (ThreadSanitizer saw it), and the number could be handed to
+        // the next open, under which the worker's path would then resolve.
         return;
     }
     for (std::thread& t : g->workers) t.join();

@@ -90,12 +90,15 @@ int validate_sem(const Rsem* s, char* why, std::size_t n) {
         return corrupt(why, n, "kind is %u, not binary or counting", kind);
     if (kind == CHM_SEM_BINARY && s->count.load(R) > 1) return corrupt(why, n, "count is %u in a binary semaphore", s->count.load(R));
     // Only a quiescent semaphore's nwaiting is exact: the scan counts when
-    // the lock was free and nwaiting and count unchanged from before it to
-    // after it (a P or V landing during the scan otherwise reads as
+    // the lock was free and nwaiting, count and seq unchanged from before
+    // it to after it (a P or V landing during the scan otherwise reads as
     // corruption); else it is tried again, a few times, then not judged.
+    // seq because a grant and a new waiter in between bring nwaiting back
+    // to its value (seen under ThreadSanitizer's timing: "nwaiting is 1,
+    // 0 records wait"); every waiter that enqueues moves seq.
     for (int attempt = 0; attempt < 8; ++attempt) {
         const std::uint32_t token = s->lock.token.load(std::memory_order_acquire);
-        const std::uint32_t nwaiting = s->nwaiting.load(R), count = s->count.load(R);
+        const std::uint32_t nwaiting = s->nwaiting.load(R), count = s->count.load(R), seq = s->seq.load(R);
         std::uint32_t waiting = 0;
         for (std::uint32_t i = 0; i < CHM_RSEM_WAITERS; ++i) {
             const std::uint32_t st = s->w[i].state.load(R);
@@ -104,7 +107,7 @@ int validate_sem(const Rsem* s, char* why, std::size_t n) {
         }
         std::atomic_thread_fence(std::memory_order_acquire);
         const bool stable = token == 0 && s->lock.token.load(R) == 0 && s->nwaiting.load(R) == nwaiting &&
-                            s->count.load(R) == count;
+                            s->count.load(R) == count && s->seq.load(R) == seq;
         if (!stable) continue;
         if (nwaiting != waiting) return corrupt(why, n, "nwaiting is %u, %u records wait", nwaiting, waiting);
         return 0;
