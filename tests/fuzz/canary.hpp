@@ -65,7 +65,7 @@ inline void plant(char* base, const bp::Layout& l, const Canary& c) {
         if (bp::status_state(e->status.load()) == bp::SlotState::Free) continue;
         e->pid.store(std::uint32_t(c.pid));
         e->tid.store(std::uint32_t(c.pid));
-        e->pid_start = c.start;
+        e->pid_start.store(c.start);
         e->recoverer.store(bp::recoverer_word(std::uint32_t(c.pid), c.start));
         e->idle.store(3);
     }

@@ -117,7 +117,7 @@ TEST_F(CanaryTest, NoSignalReachesAProcessTheTableNamesFalsely) {
         if (chm::bp::status_state(e->status.load()) == chm::bp::SlotState::Free) continue;
         e->pid.store(cp);
         e->tid.store(cp);
-        e->pid_start = cstart;
+        e->pid_start.store(cstart);
         e->recoverer.store(chm::bp::recoverer_word(cp, cstart));
         e->idle.store(3);  // asleep in ppoll: a ring interrupts with a directed signal
     }

@@ -56,7 +56,7 @@ std::string describe_live(const chm::bp::View& v, bool rtpus_only) {
         const bool host = e->kind.load() == 2;
         if (rtpus_only && host) continue;
         const int pid = int(e->pid.load());
-        if (!chm::bp::proc_alive(pid, e->pid_start)) continue;
+        if (!chm::bp::proc_alive(pid, e->pid_start.load())) continue;
         const std::string who = s == 0 && !host ? "the host server" : std::string(host ? "host " : "RTPU ") + std::to_string(s);
         live += (live.empty() ? "" : ", ") + who + " (pid " + std::to_string(pid) + ")";
     }

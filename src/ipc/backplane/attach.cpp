@@ -96,7 +96,7 @@ void fill_slot(RtpuEntry* e, SlotKind kind, const char* name) {
 // FREE slot never names a process (the next joiner's naming CAS expects a
 // vacancy). The final CAS fails only when a judge recovered it meanwhile.
 void vacate(RtpuEntry* e, std::uint32_t gen, SlotState from) {
-    e->pid_start = 0;
+    e->pid_start.store(0);
     e->pid.store(vacant_pid(gen), std::memory_order_release);
     std::uint32_t st = make_status(gen, from);
     e->status.compare_exchange_strong(st, make_status(gen, SlotState::Free), std::memory_order_acq_rel);
@@ -142,7 +142,7 @@ int take_slot(const View& v, std::uint32_t s, SlotKind kind, const char* name, b
             CHM_STOP_POINT("bp.take_slot.before_name");
             if (!e->pid.compare_exchange_strong(vacancy, std::uint32_t(::getpid()), std::memory_order_acq_rel))
                 continue;  // given up as dead while we stalled: that generation is lost
-            e->pid_start = self_start_time();
+            e->pid_start.store(self_start_time());
             fill_slot(e, kind, name);
             // A recoverer killed between its last step and clearing its word
             // left it behind; a live one's (about to clear it) stays.

@@ -37,7 +37,7 @@ void check_table(const View& v, Report& r, Summary* sum) {
         case SlotState::Running:
         case SlotState::Leaving:
             if (!pid_named(pid)) r.problem("rtpu[%u]: %s without a pid (pid word %#x)", s, state_name(state), pid);
-            else if (!proc_alive(int(pid), e->pid_start))
+            else if (!proc_alive(int(pid), e->pid_start.load()))
                 r.problem("rtpu[%u]: %s but process %u is dead (not recovered yet)", s, state_name(state), pid);
             if (kind == std::uint32_t(SlotKind::Host)) ++sum->hosts; else ++sum->rtpus;
             break;

@@ -149,12 +149,22 @@ constexpr std::uint32_t recoverer_word(std::uint32_t pid, std::uint64_t start) {
 }
 constexpr std::uint32_t recoverer_pid_of(std::uint32_t w) { return w & (kPidLimit - 1); }
 
+// A 64-bit word of the file that judges read while a joiner or a
+// recoverer writes it: every access one relaxed atomic load or store, so
+// nobody reads half of one (a plain move on x86-64 and aarch64; on m68k a
+// libatomic call).
+struct Word64 {
+    std::uint64_t v;
+    std::uint64_t load() const { return __atomic_load_n(&v, __ATOMIC_RELAXED); }
+    void store(std::uint64_t x) { __atomic_store_n(&v, x, __ATOMIC_RELAXED); }
+};
+
 struct RtpuEntry {
     A32 status;              // generation << 8 | SlotState
     A32 kind;                // SlotKind
     A32 pid;                 // owning process, or vacant_pid(generation) (above)
     A32 tid;                 // its kernel thread: target of a directed signal
-    std::uint64_t pid_start; // field 22 of /proc/<pid>/stat: detects pid reuse (0: unknown)
+    Word64 pid_start;        // field 22 of /proc/<pid>/stat: detects pid reuse (0: unknown)
     A32 heartbeat_ms;        // monotonic ms, bumped by the owner's monitor thread
     A32 mailbox;             // futex word of the RTPU's mailbox interrupt (kernel issue)
     A32 pending;             // pending mailbox events, one bit per source (kernel issue)

@@ -27,12 +27,12 @@ bool slot_holder_dead(const View& v, std::uint32_t slot, std::uint32_t st) {
         const std::uint32_t p = e->pid.load(std::memory_order_acquire);
         if (p == vacant_pid(status_gen(st))) return true;  // given up (joining_abandon)
         if (!pid_named(p)) return false;  // not named yet: only joining_abandon may judge it
-        return !proc_alive(int(p), e->pid_start);
+        return !proc_alive(int(p), e->pid_start.load());
     }
     case SlotState::Running:
     case SlotState::Leaving: {
         const std::uint32_t p = e->pid.load(std::memory_order_relaxed);
-        return !pid_named(p) || !proc_alive(int(p), e->pid_start);
+        return !pid_named(p) || !proc_alive(int(p), e->pid_start.load());
     }
     case SlotState::Recovering:
         return !recoverer_alive(e->recoverer.load(std::memory_order_acquire));
@@ -51,7 +51,7 @@ bool joining_abandon(const View& v, std::uint32_t slot, std::uint32_t st, std::u
         return false;
     const std::uint32_t vacated = vacant_pid(status_gen(st));
     if (pid == vacated) return true;
-    if (pid_named(pid)) return !proc_alive(int(pid), e->pid_start);
+    if (pid_named(pid)) return !proc_alive(int(pid), e->pid_start.load());
     std::uint32_t expect = pid;
     return e->pid.compare_exchange_strong(expect, vacated, std::memory_order_acq_rel);
 }

@@ -171,7 +171,7 @@ int verify(const View& v, int fd, std::uint32_t slot, int pid, int tid, char* wh
     }
     const std::uint64_t start = proc_start_time(pid);
     if (start == 0) return refuse("pid", pid, "names no live process");
-    if (start != e->pid_start) return refuse("pid", pid, "names a process other than the one that joined (start time differs)");
+    if (start != e->pid_start.load()) return refuse("pid", pid, "names a process other than the one that joined (start time differs)");
     struct stat file{};
     if (::fstat(fd, &file) != 0) return refuse("pid", pid, "cannot be checked (the backplane file cannot be fstat'ed)");
     char st[4096];
@@ -285,7 +285,7 @@ int signal_process(const View& v, int fd, std::uint32_t slot, std::uint32_t stat
         if (pidfd >= 0) r = pidfd_signal(pidfd, sig) == 0 ? 0 : -errno;
         // No pidfd (qemu-user, old kernels): the start time, checked once
         // more right before the signal, is what guards against reuse.
-        if (pidfd < 0 || r == -ENOSYS) r = proc_start_time(pid) == e->pid_start && ::kill(pid, sig) == 0 ? 0 : -ESRCH;
+        if (pidfd < 0 || r == -ENOSYS) r = proc_start_time(pid) == e->pid_start.load() && ::kill(pid, sig) == 0 ? 0 : -ESRCH;
     }
     if (pidfd >= 0) ::close(pidfd);
     return r;
@@ -323,7 +323,7 @@ int open_member_file(std::uint32_t slot, int remote_fd, int* out) {
     const int fd = open_proc(pid, rest);
     if (fd < 0) return -errno;
     // Still the member checked above (its pid not reused meanwhile).
-    if (proc_start_time(pid) != e->pid_start || e->status.load(std::memory_order_acquire) != status) {
+    if (proc_start_time(pid) != e->pid_start.load() || e->status.load(std::memory_order_acquire) != status) {
         ::close(fd);
         return -ESRCH;
     }

@@ -76,7 +76,7 @@ void arm(Monitor& m, std::uint32_t s, std::uint32_t st) {
     }
     // The pidfd names whoever has `pid` now; it is the slot's process only
     // if the start time still matches (else the pid was reused).
-    if (!proc_alive(pid, e->pid_start)) {
+    if (!proc_alive(pid, e->pid_start.load())) {
         ::close(fd);
         w.gone = true;
         return;

@@ -98,7 +98,7 @@ void do_recover(const View& v, std::uint32_t slot, std::uint32_t gen) {
 
     // 3. The slot itself: its name and kind stay for the status display.
     RtpuEntry* e = v.rtpu(slot);
-    e->pid_start = 0;
+    e->pid_start.store(0);
     e->pid.store(vacant_pid(gen), std::memory_order_release);
     e->tid.store(0, R);
     e->pending.store(0, R);
