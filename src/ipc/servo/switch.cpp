@@ -164,9 +164,10 @@ int commit(std::uint64_t at, svar::DecisionRef sw, const Item* items, std::uint3
             if (items[i].on) run_entry(items[i].m, kEntryOff);
         return r;
     }
-    for (std::uint32_t i = 0; i < count && r == 0; ++i) {
-        chm_module* m = items[i].m;
-        if (!items[i].on) continue;
+    std::uint32_t armed = 0;
+    for (; armed < count && r == 0; ++armed) {
+        chm_module* m = items[armed].m;
+        if (!items[armed].on) continue;
         if ((r = svar::set_claim_for_switch(m->set, displace, n_displace, at, sw)) != 0) {
             std::snprintf(why, n, "%s", chm_bp_last_error());
             break;
@@ -175,7 +176,6 @@ int commit(std::uint64_t at, svar::DecisionRef sw, const Item* items, std::uint3
         if ((r = spawn_cycle_task(m, grid_at_or_after(at, m->period_ns))) != 0) {
             m->sw_arm.store(chm_module::kNotArmed);
             (void)chm_svar_set_release(m->set);
-            run_entry(m, kEntryOff);
             std::snprintf(why, n, "%s: cannot spawn its cycle task (%d)", m->name, r);
             break;
         }
@@ -183,8 +183,13 @@ int commit(std::uint64_t at, svar::DecisionRef sw, const Item* items, std::uint3
         m->state.store(CHM_SERVO_ON);
     }
     if (r) {
-        for (std::uint32_t i = 0; i < count; ++i)
-            if (items[i].on) cancel_switched_on(items[i].m);
+        // Those armed lose their task; the failing one and those after it
+        // ran `on` only.
+        for (std::uint32_t i = 0; i < count; ++i) {
+            if (!items[i].on) continue;
+            if (i < armed) cancel_switched_on(items[i].m);
+            else run_entry(items[i].m, kEntryOff);
+        }
         return r;
     }
     // Modules going off alone stop at their first release at or after T,
