@@ -34,7 +34,8 @@ extern "C" {
  * chm_spin_init before first use; never copy a lock that may be held. */
 typedef struct chm_spin {
     uint32_t word;        /* holder's token: 0 = free */
-    uint32_t owner_task;  /* holder's task id, or 0x80000000 | thread id */
+    uint32_t owner_task;  /* holder's task id in 31 bits (its slot, bits 0..15, and its
+                           * generation folded into 1..0x7fff), or 0x80000000 | thread id */
     uint32_t dirty;       /* free for the user: e.g. 1 while changing the data */
     uint32_t reserved;
 } chm_spin_t;

@@ -14,6 +14,7 @@
 #include "chimera/kernel.h"
 #include "chimera/task.h"
 #include "ipc/backplane/backplane.hpp"
+#include "kernel.hpp"
 #include "port.hpp"
 
 namespace chm::bp {
@@ -125,7 +126,7 @@ void relinquish(std::uint64_t ns) {
 static thread_local std::uint32_t t_tid = 0;
 
 std::uint32_t task_word() {
-    if (in_chimera_task()) return static_cast<std::uint32_t>(chm_task_self());
+    if (in_chimera_task()) return kernel::tid_short(chm_task_self());  // 31 bits: the layout's word
     if (!t_tid) t_tid = 0x80000000u | static_cast<std::uint32_t>(::syscall(SYS_gettid));
     return t_tid;
 }
