@@ -57,7 +57,10 @@ CHM_CHECK int chm_spin_init(chm_spin_t* lock);
  * timeout_ns is CHM_NO_WAIT (it was -ETIMEDOUT before the timeout
  * convention); -ETIMEDOUT: not acquired within a positive timeout_ns;
  * -EINVAL NULL or misaligned; -ENOTCONN not attached.
- * Not recursive: a second lock by the same RTPU waits like anyone else. */
+ * Not recursive: a second lock by the same RTPU waits like anyone else.
+ * With the interrupt mask held (an interrupt handler, a chm_irq_lock
+ * section) the wait is at most 20 µs, spinning, whatever timeout_ns says:
+ * nothing else of the RTPU runs meanwhile (-ETIMEDOUT then). */
 CHM_CHECK int chm_spin_lock(chm_spin_t* lock, uint64_t poll_interval_ns, uint64_t timeout_ns);
 
 /* One attempt, never waiting: 0 acquired; -EOWNERDEAD acquired from a dead

@@ -176,8 +176,10 @@ struct WakeBuf : Wakes {
 
 // Lock the queue for `me`. A lock robbed from a dead holder that left the
 // queue mid-change is rebuilt first. 0; -EDEADLK a live holder kept it
-// past the bound; -ENOTRECOVERABLE broken (the lock is not held then).
-int lock_queue(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t me);
+// past bp::kInternalTimeoutNs; with `try_only` (a try call) -EAGAIN a live
+// holder kept it past bp::kTryLockNs; -ENOTRECOVERABLE broken (the lock
+// is not held then).
+int lock_queue(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t me, bool try_only = false);
 void unlock_queue(QueueHeader* q);
 
 // With the lock held: grant the most urgent ungranted waiter of `state`

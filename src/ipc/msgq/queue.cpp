@@ -10,6 +10,7 @@
 #include "chimera/bp.h"
 #include "chimera/kernel.h"
 #include "chimera/task.h"
+#include "ipc/backplane/stop_point.hpp"
 #include "ipc/err/report.hpp"
 #include "ipc/msgq/msgq.hpp"
 #include "ipc/wake/wake.hpp"
@@ -209,8 +210,9 @@ struct RecvOp {
 // The whole operation, lock to unlock.
 template <class Op>
 int run(const bp::Attachment* a, QueueHeader* q, const Geo& g, const Op& op, WaitLimit limit) {
-    int r = lock_queue(*a, q, g, a->token);
+    int r = lock_queue(*a, q, g, a->token, limit.kind == WaitLimit::kNoWait);
     if (r) return r;
+    CHM_STOP_POINT("msgq.run.locked");
     WakeBuf<2> wakes;
     // The path that needs no wait.
     if (!q->destroyed.load(R) && op.ready(q, g)) {
@@ -337,11 +339,20 @@ void Wakes::deliver() {
     n = 0;
 }
 
-int lock_queue(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t me) {
-    const int r = bp::lock_acquire(v, &q->lock, me, kLockPollNs, bp::kInternalTimeoutNs);
+int lock_queue(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t me, bool try_only) {
+    const int r = try_only ? bp::lock_acquire_brief(v, &q->lock, me, bp::kTryLockNs)
+                           : bp::lock_acquire(v, &q->lock, me, kLockPollNs, bp::kInternalTimeoutNs);
+    if (r == -EBUSY) {
+        char who[48];
+        bp::lock_holder(&q->lock, who, sizeof who);
+        bp::set_error("message queue: its lock is held by %s, a live peer: a try call does not wait", who);
+        return -EAGAIN;
+    }
     if (r == -ETIMEDOUT) {
-        bp::set_error("message queue: its lock was held past %llu ms by a live peer",
-                      static_cast<unsigned long long>(bp::kInternalTimeoutNs / 1000000));
+        char who[48];
+        bp::lock_holder(&q->lock, who, sizeof who);
+        bp::set_error("message queue: its lock was held by %s, a live peer, past %s", who,
+                      bp::masked_wait() ? "20 us (interrupts masked)" : "5 s");
         return -EDEADLK;
     }
     if (r == -EOWNERDEAD) {
