@@ -62,6 +62,7 @@ struct Tcb {
     bool used = false;
     std::uint64_t gen = 0;   // 1..kGenMax; the id's bits 16..62 (tid_of)
     std::uint32_t index = 0;
+    std::uint32_t short_id = 0;  // tid_short of its id, set at spawn (read at every switch)
     std::int32_t next_free = -1;
     int saved_errno = 0;
     std::uint32_t lock_nest = 0;      // chm_task_lock depth
@@ -381,7 +382,7 @@ inline std::uint32_t tid_short(chm_tid_t id) {
     const std::uint64_t gen = std::uint64_t(id) >> 16;
     return std::uint32_t(id & 0xffff) | std::uint32_t(((gen - 1) % 0x7fff + 1) << 16);
 }
-inline std::uint32_t tid_short(const Tcb* t) { return tid_short(tid_of(t)); }
+inline std::uint32_t tid_short(const Tcb* t) { return t->short_id; }
 // Is `s` the scheduler view of a live TCB? O(1); never dereferences a
 // pointer that is not inside the TCB array.
 bool tcb_view_valid(const chm_sched_task_t* s);

@@ -67,6 +67,14 @@ void churn(void*) {
     EXPECT_STREQ(st.name, "live");
     EXPECT_EQ(st.state, CHM_TASK_READY) << "untouched by the calls on stale ids";
     EXPECT_GT(uint64_t(live) >> 16, uint64_t(kChurn)) << "the generation counts on past 15 bits";
+    // The 31-bit form shared memory carries: the old id for a slot's first
+    // 32,767 generations, folded into 1..0x7fff after, cached in the TCB.
+    EXPECT_EQ(kernel::tid_short(first), std::uint32_t(first));
+    const std::uint32_t s = kernel::tid_short(live);
+    EXPECT_EQ(s & 0xffff, std::uint32_t(live & 0xffff));
+    EXPECT_GE(s >> 16, 1u);
+    EXPECT_LE(s >> 16, 0x7fffu);
+    EXPECT_EQ(kernel::tid_short(&kernel::g_k.tcbs[live & 0xffff]), s);
 }
 
 TEST_F(TaskIds, AStaleIdNeverNamesALaterTaskOfItsSlot) {

@@ -42,6 +42,7 @@ Tcb* slot_take_locked() {
     new (t) Tcb();
     t->gen = gen + 1;  // never wraps: slot_release_locked retires a slot at kGenMax
     t->index = i;
+    t->short_id = tid_short(tid_of(t));  // no 64-bit division per switch
     t->used = true;
     t->tmr.owner = t->dl.owner = t;
     t->tmr.kind = TimerKind::Wake;
