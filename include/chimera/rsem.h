@@ -76,7 +76,9 @@ CHM_CHECK int chm_rsem_open(const char* name, chm_rsem_t** out);
  * chm_rsem_try_p (and CHM_NO_WAIT) never waits for another process: its
  * -EAGAIN also means the semaphore's lock is held by a live process that
  * stalled inside a call (stopped, descheduled); it spins at most 20 µs for
- * the lock and chm_err_last names the holder's slot and task. */
+ * the lock and chm_err_last names the holder's slot and task. A timed P
+ * (or one with a deadline) waits for that lock no longer than its own
+ * limit: -ETIMEDOUT then; chm_rsem_p waits up to 5 s (-EDEADLK). */
 CHM_CHECK int chm_rsem_p(chm_rsem_t* sem);
 CHM_CHECK int chm_rsem_p_timed(chm_rsem_t* sem, uint64_t timeout_ns);
 CHM_CHECK int chm_rsem_p_until(chm_rsem_t* sem, uint64_t deadline_ns);

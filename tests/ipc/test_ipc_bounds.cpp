@@ -9,9 +9,9 @@
 #include <cstdlib>
 #include <string>
 
+#include "chimera/irq.h"
 #include "chimera/msgq.h"
 #include "chimera/rsem.h"
-#include "chimera/irq.h"
 #include "ipc_fixture.hpp"
 #include "rsem_fixture.hpp"
 #include "rtpu_child.hpp"
@@ -34,10 +34,10 @@ constexpr std::uint64_t kLeaveNs = 20'000'000'000ull;
 std::string last_error() { return chm_bp_last_error(); }
 
 // A child attaches, opens the semaphore and stops inside chm_rsem_v
-// holding its lock: chm_rsem_try_p gives -EAGAIN naming the holder, and a
-// V -EBUSY, each at once; let go, the child's V lands and ours is not
-// counted twice.
-TEST_F(IpcBounds, TryPAndVReturnAtOnceWhileAStalledPeerHoldsTheSemaphoresLock) {
+// holding its lock: chm_rsem_try_p gives -EAGAIN naming the holder, a
+// timed P -ETIMEDOUT after its own timeout, and a V -EBUSY after 10 ms;
+// let go, the child's V lands and ours is not counted twice.
+TEST_F(IpcBounds, PAndVReturnWithinTheirBoundsWhileAStalledPeerHoldsTheSemaphoresLock) {
     create();
     ASSERT_EQ(chm_bp_attach_host(path_.c_str(), "test", nullptr), 0) << chm_bp_last_error();
     chm_rsem_t* s = make("s", CHM_SEM_COUNTING, 1);
@@ -60,6 +60,14 @@ TEST_F(IpcBounds, TryPAndVReturnAtOnceWhileAStalledPeerHoldsTheSemaphoresLock) {
     t0 = now_ns();
     EXPECT_EQ(chm_rsem_p_timed(s, CHM_NO_WAIT), -EAGAIN);
     EXPECT_LT(now_ns() - t0, kAtOnceNs);
+    // A timed P waits for the lock no longer than its own timeout.
+    t0 = now_ns();
+    EXPECT_EQ(chm_rsem_p_timed(s, 100'000'000), -ETIMEDOUT);
+    EXPECT_LT(now_ns() - t0, kAtOnceNs);
+    EXPECT_NE(last_error().find("past the call's timeout"), std::string::npos) << last_error();
+    t0 = now_ns();
+    EXPECT_EQ(chm_rsem_p_until(s, chm_time_now() + 100'000'000), -ETIMEDOUT);
+    EXPECT_LT(now_ns() - t0, kAtOnceNs);
     t0 = now_ns();
     EXPECT_EQ(chm_rsem_v(s), -EBUSY);
     EXPECT_LT(now_ns() - t0, kAtOnceNs);
@@ -74,8 +82,9 @@ TEST_F(IpcBounds, TryPAndVReturnAtOnceWhileAStalledPeerHoldsTheSemaphoresLock) {
 
 // The same for a message queue: a child stopped inside chm_msgq_send
 // holding the queue's lock; try_send and try_receive return -EAGAIN at
-// once though the queue has both room and a message.
-TEST_F(IpcBounds, TrySendAndTryReceiveReturnAtOnceWhileAStalledPeerHoldsTheQueuesLock) {
+// once though the queue has both room and a message, and timed calls
+// -ETIMEDOUT after their own timeout.
+TEST_F(IpcBounds, SendAndReceiveReturnWithinTheirBoundsWhileAStalledPeerHoldsTheQueuesLock) {
     create();
     ASSERT_EQ(chm_bp_attach_host(path_.c_str(), "test", nullptr), 0) << chm_bp_last_error();
     chm_msgq_attr_t a;
@@ -106,6 +115,14 @@ TEST_F(IpcBounds, TrySendAndTryReceiveReturnAtOnceWhileAStalledPeerHoldsTheQueue
     EXPECT_LT(now_ns() - t0, kAtOnceNs);
     t0 = now_ns();
     EXPECT_EQ(chm_msgq_receive_timed(q, buf, sizeof buf, nullptr, CHM_NO_WAIT), -EAGAIN);
+    EXPECT_LT(now_ns() - t0, kAtOnceNs);
+    // A timed call waits for the lock no longer than its own timeout.
+    t0 = now_ns();
+    EXPECT_EQ(chm_msgq_send_timed(q, 3, 0, "third", 5, 100'000'000), -ETIMEDOUT);
+    EXPECT_LT(now_ns() - t0, kAtOnceNs);
+    EXPECT_NE(last_error().find("past the call's timeout"), std::string::npos) << last_error();
+    t0 = now_ns();
+    EXPECT_EQ(chm_msgq_receive_until(q, buf, sizeof buf, nullptr, chm_time_now() + 100'000'000), -ETIMEDOUT);
     EXPECT_LT(now_ns() - t0, kAtOnceNs);
 
     kill(holder, SIGCONT);

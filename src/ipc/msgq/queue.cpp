@@ -210,7 +210,7 @@ struct RecvOp {
 // The whole operation, lock to unlock.
 template <class Op>
 int run(const bp::Attachment* a, QueueHeader* q, const Geo& g, const Op& op, WaitLimit limit) {
-    int r = lock_queue(*a, q, g, a->token, limit.kind == WaitLimit::kNoWait);
+    int r = lock_queue(*a, q, g, a->token, &limit);
     if (r) return r;
     CHM_STOP_POINT("msgq.run.locked");
     WakeBuf<2> wakes;
@@ -339,14 +339,23 @@ void Wakes::deliver() {
     n = 0;
 }
 
-int lock_queue(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t me, bool try_only) {
-    const int r = try_only ? bp::lock_acquire_brief(v, &q->lock, me, bp::kTryLockNs)
-                           : bp::lock_acquire(v, &q->lock, me, kLockPollNs, bp::kInternalTimeoutNs);
-    if (r == -EBUSY) {
+int lock_queue(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t me, const WaitLimit* limit) {
+    bool own = false;  // the call's own timeout is the bound
+    const std::uint64_t bound = limit ? limit->lock_budget(bp::kInternalTimeoutNs, &own) : bp::kInternalTimeoutNs;
+    const bool try_call = limit && limit->kind == WaitLimit::kNoWait;
+    const int r = bound == 0 ? bp::lock_acquire_brief(v, &q->lock, me, bp::kTryLockNs)
+                             : bp::lock_acquire(v, &q->lock, me, kLockPollNs, bound);
+    if (r == -EBUSY && try_call) {
         char who[48];
         bp::lock_holder(&q->lock, who, sizeof who);
         bp::set_error("message queue: its lock is held by %s, a live peer: a try call does not wait", who);
         return -EAGAIN;
+    }
+    if (r == -EBUSY || (r == -ETIMEDOUT && own)) {  // a deadline reached, or the call's timeout ran out
+        char who[48];
+        bp::lock_holder(&q->lock, who, sizeof who);
+        bp::set_error("message queue: its lock was held by %s, a live peer, past the call's timeout", who);
+        return -ETIMEDOUT;
     }
     if (r == -ETIMEDOUT) {
         char who[48];

@@ -129,13 +129,25 @@ enum class LockWait {
     kBlocking,  // kInternalTimeoutNs (5 s), then -EDEADLK
     kTry,       // kTryLockNs (20 µs) spinning, then -EAGAIN: a try never waits
     kRelease,   // kReleaseLockNs (10 ms), then -EBUSY: a V is not held up for seconds
+    kTimed,     // what is left of the call's timeout (< 5 s), then -ETIMEDOUT
 };  // With the interrupt mask held, each is cut to kTryLockNs (masked_wait).
 
-int lock(Rsem* s, LockWait wait = LockWait::kBlocking) {
+// The lock wait of a P with `limit`.
+LockWait p_wait(const chm::ipc::WaitLimit& limit, std::uint64_t* budget) {
+    bool own = false;
+    *budget = limit.lock_budget(kInternalTimeoutNs, &own);
+    if (limit.kind == chm::ipc::WaitLimit::kNoWait) return LockWait::kTry;
+    return own ? LockWait::kTimed : LockWait::kBlocking;
+}
+
+int lock(Rsem* s, LockWait wait = LockWait::kBlocking, std::uint64_t budget = 0) {
     Attachment* a = current();
-    int r = wait == LockWait::kTry ? lock_acquire_brief(*a, &s->lock, a->token, kTryLockNs)
-                                   : lock_acquire(*a, &s->lock, a->token, kInternalPollNs,
-                                                  wait == LockWait::kRelease ? kReleaseLockNs : kInternalTimeoutNs);
+    const std::uint64_t bound = wait == LockWait::kRelease  ? kReleaseLockNs
+                                : wait == LockWait::kTimed ? budget
+                                                           : kInternalTimeoutNs;
+    int r = wait == LockWait::kTry || bound == 0
+                ? lock_acquire_brief(*a, &s->lock, a->token, kTryLockNs)
+                : lock_acquire(*a, &s->lock, a->token, kInternalPollNs, bound);
     if (r == -EOWNERDEAD) {
         repair_locked(s);
         lock_clear_dirty(&s->lock);
@@ -149,15 +161,17 @@ int lock(Rsem* s, LockWait wait = LockWait::kBlocking) {
             return -EAGAIN;
         }
         // With the interrupt mask held every wait is a try's (masked_wait).
-        const char* bound = masked_wait() ? "20 us (interrupts masked)"
-                            : wait == LockWait::kRelease ? "10 ms" : "5 s";
+        const char* past = masked_wait() ? "20 us (interrupts masked)"
+                           : wait == LockWait::kRelease ? "10 ms"
+                           : wait == LockWait::kTimed   ? "the call's timeout"
+                                                        : "5 s";
         if (wait == LockWait::kRelease) {
             set_error("remote semaphore: its lock was held by %s, a live process, past %s: the unit was not given",
-                      who, bound);
+                      who, past);
             return -EBUSY;
         }
-        set_error("remote semaphore: its lock was held by %s, a live process, past %s", who, bound);
-        return -EDEADLK;
+        set_error("remote semaphore: its lock was held by %s, a live process, past %s", who, past);
+        return wait == LockWait::kTimed ? -ETIMEDOUT : -EDEADLK;
     }
     if (r == 0 && s->broken.load()) {
         lock_release(&s->lock);
@@ -397,7 +411,9 @@ static int rsem_p_impl(chm_rsem_t* h, WaitLimit limit) {
     Rsem* s = from_handle(h);
     if (!s) return set_error("chm_rsem_p: not a remote semaphore handle"), -EINVAL;
     Attachment* a = current();
-    if (int r = lock(s, limit.kind == WaitLimit::kNoWait ? LockWait::kTry : LockWait::kBlocking)) return r;
+    std::uint64_t budget;
+    const LockWait how = p_wait(limit, &budget);
+    if (int r = lock(s, how, budget)) return r;
     if (s->count.load() > 0) {  // the fast path: one lock, no system call
         s->count.store(s->count.load(std::memory_order_relaxed) - 1, std::memory_order_relaxed);  // lock held
         unlock(s);
