@@ -5,7 +5,7 @@
 
 /* A control program: an ordinary main, run as a task by the RTPU. */
 int main(int argc, char **argv) {
-    printf("%s: %d argument(s), task %d\n", argv[0], argc - 1, (int)chm_task_self());
+    printf("%s: %d argument(s), task %lld\n", argv[0], argc - 1, (long long)chm_task_self());
     /* Host files go through the host server; without one: an error. */
     int fd = chm_xfs_open("notes.txt", CHM_XFS_RDONLY, 0);
     if (fd >= 0) {

@@ -66,6 +66,6 @@ int main(int argc, char **argv) {
         printf("controller: %s\n", chm_err_last());
         return 1;
     }
-    printf("controller: answering %s on RTPU %d (task %d)\n", LOOP_SENSE, chm_bp_self(), (int)tid);
+    printf("controller: answering %s on RTPU %d (task %lld)\n", LOOP_SENSE, chm_bp_self(), (long long)tid);
     return 0;
 }

@@ -30,6 +30,29 @@ static enum chm_deadline_action on_miss(const chm_deadline_info_t *info, void *a
     return CHM_DL_CONTINUE;
 }
 
+/* Records not yet handed to loop.stats, oldest first. A try send returns
+ * at once when the monitor (an ordinary host process, which the OS may
+ * deschedule while it holds the queue's lock) is inside a call, as when
+ * the queue is full: the record then goes with the next cycle's, in order,
+ * and only a backlog of STATS_BACKLOG records (the monitor not reading)
+ * drops the oldest. */
+#define STATS_BACKLOG 64
+static loop_stat_t g_backlog[STATS_BACKLOG];
+static unsigned g_backlog_first, g_backlog_n;
+
+static void report(const loop_stat_t *st) {
+    if (g_backlog_n == STATS_BACKLOG) { /* the oldest goes */
+        g_backlog_first = (g_backlog_first + 1) % STATS_BACKLOG;
+        --g_backlog_n;
+        ++g_stats_dropped;
+    }
+    g_backlog[(g_backlog_first + g_backlog_n++) % STATS_BACKLOG] = *st;
+    while (g_backlog_n && chm_msgq_try_send(g_stats, 0, 0, &g_backlog[g_backlog_first], sizeof *st) == 0) {
+        g_backlog_first = (g_backlog_first + 1) % STATS_BACKLOG;
+        --g_backlog_n;
+    }
+}
+
 /* Wait for the answer to `seq` until `until_ns`; older answers (to a
  * sample whose wait already ran out) are dropped. 1: *out holds it. */
 static int await_reply(uint64_t seq, uint64_t until_ns, loop_reply_t *out) {
@@ -119,8 +142,7 @@ static void sensor(void *arg) {
         st.unsent = (uint32_t)g_unsent;
         st.position = (float)pos;
         st.setpoint = loop_setpoint(seq);
-        /* No monitor reading: the record is dropped, the loop goes on. */
-        if (chm_msgq_try_send(g_stats, 0, 0, &st, sizeof st) != 0) ++g_stats_dropped;
+        report(&st); /* no monitor reading: records are dropped, the loop goes on */
         chm_task_wait_period();
     }
 }

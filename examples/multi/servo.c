@@ -109,7 +109,7 @@ int main(int argc, char **argv) {
         printf("servo: %s\n", chm_err_last());
         return 1;
     }
-    printf("servo: 1 kHz loop running on RTPU %d (task %d); state in %s, tick on %s\n", chm_bp_self(), (int)tid,
+    printf("servo: 1 kHz loop running on RTPU %d (task %lld); state in %s, tick on %s\n", chm_bp_self(), (long long)tid,
            SERVO_STATE, SERVO_TICK);
     return 0;
 }

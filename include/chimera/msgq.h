@@ -163,7 +163,12 @@ CHM_CHECK int chm_msgq_destroy(const char* name);
  * broken; -EDEADLK its lock was held past 5 s by a live peer; -EBADMSG an
  * index read from shared memory (the free list's head, a list's tail) is
  * out of range (the message is not sent); -ENOTCONN.
- * On any error nothing was queued. */
+ * On any error nothing was queued. The try call (and CHM_NO_WAIT) never
+ * waits for another process: its -EAGAIN also means the queue's lock is
+ * held by a live peer that stalled inside a call (it spins at most 20 µs
+ * for the lock; chm_err_last names the holder's slot and task). A timed
+ * send (or one with a deadline) waits for that lock no longer than its
+ * own limit: -ETIMEDOUT then; chm_msgq_send waits up to 5 s (-EDEADLK). */
 CHM_CHECK int chm_msgq_send(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* data, size_t len);
 CHM_CHECK int chm_msgq_send_timed(chm_msgq_t* q, uint32_t type, uint32_t prio, const void* data, size_t len,
                         uint64_t timeout_ns);
@@ -182,7 +187,9 @@ CHM_CHECK int chm_msgq_try_send(chm_msgq_t* q, uint32_t type, uint32_t prio, con
  * length); -EINVAL bad handle, NULL buf with size > 0; -EINTR; -EIDRM;
  * -ENOTRECOVERABLE; -EDEADLK; -EBADMSG a list head or the message's length
  * read from shared memory is out of range; -ENOTCONN. On any error nothing
- * was taken. */
+ * was taken. try_receive never waits for another process either (its
+ * -EAGAIN: as chm_msgq_try_send's), nor _timed / _until past their limit
+ * (-ETIMEDOUT). */
 CHM_CHECK int chm_msgq_receive(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info);
 CHM_CHECK int chm_msgq_receive_timed(chm_msgq_t* q, void* buf, size_t size, chm_msgq_msg_info_t* info,
                            uint64_t timeout_ns);

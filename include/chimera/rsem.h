@@ -72,15 +72,24 @@ CHM_CHECK int chm_rsem_open(const char* name, chm_rsem_t** out);
  * came (a past deadline included); -EINTR a user signal interrupted the
  * wait; -ENOSPC CHM_RSEM_WAITERS are waiting already; -EINVAL not a
  * semaphore handle; -ENOTRECOVERABLE damaged by a process that died in
- * it; -EDEADLK its lock was held past 5 s by a live process. */
+ * it; -EDEADLK its lock was held past 5 s by a live process.
+ * chm_rsem_try_p (and CHM_NO_WAIT) never waits for another process: its
+ * -EAGAIN also means the semaphore's lock is held by a live process that
+ * stalled inside a call (stopped, descheduled); it spins at most 20 µs for
+ * the lock and chm_err_last names the holder's slot and task. A timed P
+ * (or one with a deadline) waits for that lock no longer than its own
+ * limit: -ETIMEDOUT then; chm_rsem_p waits up to 5 s (-EDEADLK). */
 CHM_CHECK int chm_rsem_p(chm_rsem_t* sem);
 CHM_CHECK int chm_rsem_p_timed(chm_rsem_t* sem, uint64_t timeout_ns);
 CHM_CHECK int chm_rsem_p_until(chm_rsem_t* sem, uint64_t deadline_ns);
 CHM_CHECK int chm_rsem_try_p(chm_rsem_t* sem);
 
 /* V: wake the most urgent waiter, or count up (a binary semaphore stays
- * at 1). Never blocks. Errors: -EOVERFLOW count at UINT32_MAX; -EINVAL;
- * -ENOTRECOVERABLE; -EDEADLK. */
+ * at 1). Never blocks on the count; waits at most 10 ms for the
+ * semaphore's lock when a live process holds it. Errors: -EOVERFLOW count
+ * at UINT32_MAX; -EINVAL; -ENOTRECOVERABLE; -EBUSY the lock was held by a
+ * live process for 10 ms (chm_err_last names its slot and task): the unit
+ * was not given, call again. */
 CHM_CHECK int chm_rsem_v(chm_rsem_t* sem);
 
 /* The count now (>= 0), or -EINVAL. */

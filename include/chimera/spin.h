@@ -34,7 +34,8 @@ extern "C" {
  * chm_spin_init before first use; never copy a lock that may be held. */
 typedef struct chm_spin {
     uint32_t word;        /* holder's token: 0 = free */
-    uint32_t owner_task;  /* holder's task id, or 0x80000000 | thread id */
+    uint32_t owner_task;  /* holder's task id in 31 bits (its slot, bits 0..15, and its
+                           * generation folded into 1..0x7fff), or 0x80000000 | thread id */
     uint32_t dirty;       /* free for the user: e.g. 1 while changing the data */
     uint32_t reserved;
 } chm_spin_t;
@@ -56,7 +57,10 @@ CHM_CHECK int chm_spin_init(chm_spin_t* lock);
  * timeout_ns is CHM_NO_WAIT (it was -ETIMEDOUT before the timeout
  * convention); -ETIMEDOUT: not acquired within a positive timeout_ns;
  * -EINVAL NULL or misaligned; -ENOTCONN not attached.
- * Not recursive: a second lock by the same RTPU waits like anyone else. */
+ * Not recursive: a second lock by the same RTPU waits like anyone else.
+ * With the interrupt mask held (an interrupt handler, a chm_irq_lock
+ * section) the wait is at most 20 µs, spinning, whatever timeout_ns says:
+ * nothing else of the RTPU runs meanwhile (-ETIMEDOUT then). */
 CHM_CHECK int chm_spin_lock(chm_spin_t* lock, uint64_t poll_interval_ns, uint64_t timeout_ns);
 
 /* One attempt, never waiting: 0 acquired; -EOWNERDEAD acquired from a dead

@@ -14,8 +14,15 @@
 extern "C" {
 #endif
 
-/* A task id: stays invalid after the task ends (ids are generation-tagged). */
-typedef int32_t chm_tid_t;
+/* A task id: never names another task once its task has ended. 64 bits:
+ * the task's slot in bits 0..15 and the slot's generation in bits 16..62,
+ * so every id is positive. A slot whose 2^47 - 1 generations are used is
+ * retired rather than reused, so no id repeats within a process: at the
+ * fastest spawn rate (one spawn and end per ~145 ns, all on one slot) a
+ * slot lasts ~236 days and the 32,768 slots ~21,000 years. Print with
+ * "%lld" and a (long long) cast. (Before 1.0 it was 32 bits and repeated
+ * after 32,767 spawns of one slot.) */
+typedef int64_t chm_tid_t;
 #define CHM_TID_NONE ((chm_tid_t)-1)
 #define CHM_TASK_NAME_MAX 31
 
@@ -66,8 +73,8 @@ void chm_task_attr_init(chm_task_attr_t* attr);
  * at start_ns). May be called before chm_kernel_run (after init) and from
  * tasks. Errors: -EINVAL NULL entry, stack below 8 KiB, deadline longer than
  * the period, wcet longer than the deadline, period without a positive
- * deadline; -ENAMETOOLONG; -EAGAIN the scheduler refused admission;
- * -ENOMEM; -EPERM kernel not initialised. Nothing is left behind on error. */
+ * deadline; -ENAMETOOLONG; -EAGAIN the scheduler refused admission or
+ * all 32,768 task slots are in use (or retired: see chm_tid_t); -ENOMEM; -EPERM kernel not initialised. Nothing is left behind on error. */
 CHM_CHECK int chm_task_spawn(chm_tid_t* out, void (*entry)(void* arg), void* arg, const chm_task_attr_t* attr);
 
 /* End the calling task (exit status 0). Task context. Does not return.

@@ -158,7 +158,7 @@ ssize_t cookie_read(void*, char* buf, size_t n) {
     const std::uint32_t want = std::uint32_t(n < room ? n : room);
     HostRequest h{};
     h.op = kIn;
-    h.fd = chm_task_self();
+    h.a = std::uint64_t(chm_task_self());  // 64 bits: not in fd
     h.b = want;
     std::uint32_t got = 0;
     // However long the user takes to type: a dead host server is still

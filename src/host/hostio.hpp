@@ -79,7 +79,7 @@ struct Entry {
     std::uint8_t stream;    // 1 stdout, 2 stderr
     std::uint8_t pad;
     std::uint16_t len;
-    std::int32_t tid;
+    std::int32_t tid;       // the task id's low 32 bits: a diagnostic nobody reads
 };
 static_assert(sizeof(Entry) == 8);
 
@@ -97,10 +97,11 @@ enum FrameType : std::uint32_t {
 struct Frame {
     std::uint32_t type;
     std::uint32_t rtpu;
-    std::int32_t tid;
+    std::int64_t tid;       // chm_tid_t
     std::uint32_t len;
+    std::uint32_t pad = 0;
 };
-static_assert(sizeof(Frame) == 16);
+static_assert(sizeof(Frame) == 24);
 inline constexpr std::uint32_t kFrameMax = 64 * 1024;
 
 // Read exactly n bytes of a console socket (frames are read whole): false

@@ -60,8 +60,9 @@ struct Tcb {
     TaskState state = TaskState::Ready;
     bool in_ready = false;   // enqueued in the scheduler
     bool used = false;
-    std::uint16_t gen = 0;
+    std::uint64_t gen = 0;   // 1..kGenMax; the id's bits 16..62 (tid_of)
     std::uint32_t index = 0;
+    std::uint32_t short_id = 0;  // tid_short of its id, set at spawn (read at every switch)
     std::int32_t next_free = -1;
     int saved_errno = 0;
     std::uint32_t lock_nest = 0;      // chm_task_lock depth
@@ -238,6 +239,7 @@ struct Kernel {
     std::uint32_t alive = 0;
     std::int32_t free_slot = -1;    // recycled slots, oldest first, linked through Tcb::next_free
     std::int32_t free_tail = -1;    // the newest recycled slot
+    std::uint32_t slots_retired = 0;  // slots whose generations are all used (kGenMax)
 
     // Tasks parked in blocking UNIX calls (io/fdwait.cpp): the idle loop
     // waits on their descriptors; while other tasks run, io_tmr polls them.
@@ -364,7 +366,23 @@ void io_busy_arm_locked(std::uint64_t now);
 Tcb* tcb_lookup(chm_tid_t id);
 // The same, and a task that ended whose slot was not taken again (status).
 Tcb* tcb_lookup_ended_too(chm_tid_t id);
-inline chm_tid_t tid_of(const Tcb* t) { return chm_tid_t(t->index | (std::uint32_t(t->gen) << 16)); }
+// A task id: slot index in bits 0..15, the slot's generation in 16..62
+// (positive: CHM_TID_NONE and errors stay negative). A slot that has used
+// its last generation is retired, never reused (task.cpp, slot_take_locked),
+// so an id never names a second task in one process.
+inline constexpr std::uint64_t kGenMax = (std::uint64_t(1) << 47) - 1;
+inline chm_tid_t tid_of(const Tcb* t) { return chm_tid_t(t->index | (t->gen << 16)); }
+// The 31-bit form shared memory carries where a 32-bit word was laid out
+// (a backplane lock's owner_task, a waiter's and the doorbell's task
+// words): the slot, and the generation folded into 1..0x7fff (the old
+// 32-bit id, exactly, for a slot's first 32,767 tasks). Exact among live
+// tasks (two live tasks never share a slot), a diagnostic elsewhere.
+inline std::uint32_t tid_short(chm_tid_t id) {
+    if (id < 0) return 0;
+    const std::uint64_t gen = std::uint64_t(id) >> 16;
+    return std::uint32_t(id & 0xffff) | std::uint32_t(((gen - 1) % 0x7fff + 1) << 16);
+}
+inline std::uint32_t tid_short(const Tcb* t) { return t->short_id; }
 // Is `s` the scheduler view of a live TCB? O(1); never dereferences a
 // pointer that is not inside the TCB array.
 bool tcb_view_valid(const chm_sched_task_t* s);

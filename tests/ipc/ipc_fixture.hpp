@@ -11,7 +11,9 @@
 #include <cstdlib>
 #include <cstring>
 #include <ctime>
+#include <fstream>
 #include <functional>
+#include <iterator>
 #include <string>
 #include <vector>
 
@@ -25,6 +27,7 @@
 
 #include "chimera/bp.h"
 #include "ipc/backplane/backplane.hpp"
+#include "ipc/backplane/stop_point.hpp"
 #include "../private_dir.hpp"
 
 namespace chm::test {
@@ -77,6 +80,27 @@ inline chm_bp_config_t small_config() {
     c.common_size = 256 * 1024;
     c.registry_capacity = 32;
     return c;
+}
+
+// In a forked child: stop at `point` from now on (the parent may have read
+// the environment already, so the cached verdict is dropped).
+inline void stop_at(const char* point) {
+    ::setenv("CHIMERA_STOP_AT", point, 1);
+    stop::reload();
+}
+
+// Wait (bounded) until process p is stopped (state T in /proc/p/stat),
+// without reaping it.
+inline bool wait_stopped(pid_t p, int timeout_ms = 10000) {
+    const std::uint64_t end = now_ns() + std::uint64_t(timeout_ms) * 1000000u;
+    while (now_ns() < end) {
+        std::ifstream f("/proc/" + std::to_string(p) + "/stat");
+        std::string s((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+        const auto k = s.rfind(')');
+        if (k != std::string::npos && k + 2 < s.size() && s[k + 2] == 'T') return true;
+        sleep_us(1000);
+    }
+    return false;
 }
 
 // A checker's report (bp::Report::emit) collected as text, a line each.

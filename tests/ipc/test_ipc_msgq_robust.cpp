@@ -56,9 +56,14 @@ protected:
 };
 
 // Drain q (non-blocking): the first words of the messages, in order.
+// Every message queued (at least one). The first receive may wait, so it
+// robs a dead holder's lock or waits for the recovery in progress (a try
+// call returns -EAGAIN while a live recoverer holds the lock).
 std::vector<std::uint32_t> drain(chm_msgq_t* q) {
     std::vector<std::uint32_t> out;
     std::uint32_t v;
+    if (chm_msgq_receive_timed(q, &v, sizeof v, nullptr, 10'000'000'000ull) != int(sizeof v)) return out;
+    out.push_back(v);
     while (chm_msgq_try_receive(q, &v, sizeof v, nullptr) == int(sizeof v)) out.push_back(v);
     return out;
 }

@@ -26,27 +26,6 @@ protected:
     void stalled_joiner_loses(const char* point, std::uint64_t recoveries);
 };
 
-// In a forked child: stop at `point` from now on (the parent may have read
-// the environment already, so the cached verdict is dropped).
-void stop_at(const char* point) {
-    ::setenv("CHIMERA_STOP_AT", point, 1);
-    stop::reload();
-}
-
-// Wait (bounded) until process p is stopped (state T in /proc/p/stat),
-// without reaping it.
-bool wait_stopped(pid_t p, int timeout_ms = 10000) {
-    const std::uint64_t end = now_ns() + std::uint64_t(timeout_ms) * 1000000u;
-    while (now_ns() < end) {
-        std::ifstream f("/proc/" + std::to_string(p) + "/stat");
-        std::string s((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
-        const auto k = s.rfind(')');
-        if (k != std::string::npos && k + 2 < s.size() && s[k + 2] == 'T') return true;
-        sleep_us(1000);
-    }
-    return false;
-}
-
 // Wait (bounded) until no slot names process p: it left, or its death
 // was recovered.
 bool wait_gone(pid_t p, int timeout_ms = 5000) {

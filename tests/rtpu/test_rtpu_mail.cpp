@@ -137,8 +137,9 @@ TEST_F(RtpuTest, RemoteSpawnFromATaskOnAnotherRtpu) {
     ASSERT_TRUE(wait_serving(1, p1)) << read_file(err_of(1));
     ASSERT_TRUE(wait_text(result, "self")) << read_file(err_of(1));
     const std::string r = read_file(result);
-    int status = -1, tid = -1, n = -1, found = -1, sig = -1, self = -1;
-    ASSERT_EQ(std::sscanf(r.c_str(), "spawn %d %d\ntasks %d %d\nsignal %d\nself %d", &status, &tid, &n, &found, &sig,
+    int status = -1, n = -1, found = -1, sig = -1, self = -1;
+    long long tid = -1;
+    ASSERT_EQ(std::sscanf(r.c_str(), "spawn %d %lld\ntasks %d %d\nsignal %d\nself %d", &status, &tid, &n, &found, &sig,
                           &self), 6) << r;
     EXPECT_EQ(self, 0);
     EXPECT_EQ(status, 0);

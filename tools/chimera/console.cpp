@@ -44,7 +44,7 @@ struct Console {
     int sock = -1;
     std::uint32_t owned = 0;
     int fg = -1;                          // the RTPU that owns stdin
-    std::int32_t wants[CHM_BP_MAX_SLOTS]; // task reading stdin, per RTPU (-1: none)
+    std::int64_t wants[CHM_BP_MAX_SLOTS]; // task reading stdin, per RTPU (-1: none)
     chm_cmdi_t* cmdi = nullptr;
     bool interactive = false;             // a cmdi session is on the terminal
     bool feeding = false;                 // the next line typed goes to RTPU fg
@@ -226,7 +226,7 @@ int cmd_load(chm_cmdi_t* c, int argc, char** argv, void*) {
     for (int i = 3; i < argc; ++i) args.push_back(argv[i]);
     chm_tid_t tid;
     if (int r = chm_rtpu_spawn(n, real, int(args.size()), args.data(), &tid)) return remote_error(c, r);
-    chm_cmdi_printf(c, "loaded %s on RTPU %d: task %d\n", real, n, int(tid));
+    chm_cmdi_printf(c, "loaded %s on RTPU %d: task %lld\n", real, n, (long long)tid);
     return 0;
 }
 
@@ -240,7 +240,7 @@ int cmd_tasks(chm_cmdi_t* c, int argc, char** argv, void*) {
     if (k < 0) return remote_error(c, k);
     chm_cmdi_printf(c, "%8s  %-20s %-10s %12s %10s\n", "id", "name", "state", "cycles", "misses");
     for (int i = 0; i < k; ++i)
-        chm_cmdi_printf(c, "%8d  %-20s %-10s %12llu %10llu\n", int(t[i].id), t[i].name, task_state(t[i].state),
+        chm_cmdi_printf(c, "%8lld  %-20s %-10s %12llu %10llu\n", (long long)t[i].id, t[i].name, task_state(t[i].state),
                         static_cast<unsigned long long>(t[i].cycles), static_cast<unsigned long long>(t[i].misses));
     return 0;
 }
@@ -249,15 +249,15 @@ int cmd_kill(chm_cmdi_t* c, int argc, char** argv, void*) {
     if (argc != 3) return chm_cmdi_error(c, -EINVAL, "usage: kill RTPU TASK");
     const int n = rtpu_arg(c, argv[1]);
     if (n < 0) return n;
-    long id = 0;
+    long long id = 0;
     chm_tid_t tid;
-    if (chimera_tools::parse_num(argv[2], 0, INT32_MAX, &id)) {
+    if (chimera_tools::parse_tid(argv[2], &id)) {
         tid = chm_tid_t(id);
     } else if (int r = chm_rtpu_find(n, argv[2], &tid)) {
         return remote_error(c, r);
     }
     if (int r = chm_rtpu_destroy(n, tid)) return remote_error(c, r);
-    chm_cmdi_printf(c, "RTPU %d: task %d destroyed\n", n, int(tid));
+    chm_cmdi_printf(c, "RTPU %d: task %lld destroyed\n", n, (long long)tid);
     return 0;
 }
 

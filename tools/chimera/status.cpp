@@ -142,7 +142,7 @@ void tasks_of(Page& pg, int slot, History* hist, History* next) {
         char stack[32];
         std::snprintf(stack, sizeof stack, "%.1fK %3.0f%%", double(t.stack_high_water) / 1024,
                       t.stack_size ? 100.0 * double(t.stack_high_water) / double(t.stack_size) : 0.0);
-        pg.add("    %-8d %-20s %-10s %6d %1s %8s %6.1f %9llu %7llu %9s %9s %12s\n", int(t.id), t.name,
+        pg.add("    %-8lld %-20s %-10s %6d %1s %8s %6.1f %9llu %7llu %9s %9s %12s\n", (long long)t.id, t.name,
                task_state(t.state), t.priority, t.critical ? "*" : "", t.period_ns ? dur(t.period_ns).c_str() : "-",
                share, static_cast<unsigned long long>(t.cycles), static_cast<unsigned long long>(t.misses),
                t.period_ns ? dur(t.worst_lateness_ns).c_str() : "-",

@@ -110,7 +110,7 @@ int cmd_load(const Options& o, const std::vector<const char*>& args) {
         if (r < 0) {
             say("load: %s", why(r).c_str());
         } else {
-            std::printf("loaded %s on RTPU %d: task %d\n", real, rtpu, int(tid));
+            std::printf("loaded %s on RTPU %d: task %lld\n", real, rtpu, (long long)tid);
             status = 0;
         }
     }
@@ -126,10 +126,10 @@ int cmd_kill(const Options& o, const std::vector<const char*>& args) {
     if (rtpu > 0) {
         // A number is a task id; anything else a task's name.
         const char* task = args[1];
-        long id = 0;
+        long long id = 0;
         chm_tid_t tid = CHM_TID_NONE;
         int r = 0;
-        if (chimera_tools::parse_num(task, 0, INT32_MAX, &id)) {
+        if (chimera_tools::parse_tid(task, &id)) {
             tid = chm_tid_t(id);
         } else if ((r = chm_rtpu_find(rtpu, task, &tid)) == -ESRCH) {
             say("kill: RTPU %d has no task named \"%s\" (chimera status lists them)", rtpu, task);
@@ -145,14 +145,14 @@ int cmd_kill(const Options& o, const std::vector<const char*>& args) {
                 if (list[i].id == tid) name = list[i].name;
             r = chm_rtpu_destroy(rtpu, tid);
             if (r == 0) {
-                std::printf("RTPU %d: task %d%s%s%s destroyed\n", rtpu, int(tid), name.empty() ? "" : " (",
+                std::printf("RTPU %d: task %lld%s%s%s destroyed\n", rtpu, (long long)tid, name.empty() ? "" : " (",
                             name.c_str(), name.empty() ? "" : ")");
                 status = 0;
             } else if (r == -ESRCH) {
-                say("kill: RTPU %d has no task %d (chimera status lists them)", rtpu, int(tid));
+                say("kill: RTPU %d has no task %lld (chimera status lists them)", rtpu, (long long)tid);
             } else if (r == -EPERM) {
-                say("kill: task %d is RTPU %d's express-mail server: not destroyed (chimera stop --rtpu %d stops "
-                    "the RTPU)", int(tid), rtpu, rtpu);
+                say("kill: task %lld is RTPU %d's express-mail server: not destroyed (chimera stop --rtpu %d stops "
+                    "the RTPU)", (long long)tid, rtpu, rtpu);
             } else {
                 say("kill: %s", why(r).c_str());
             }

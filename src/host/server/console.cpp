@@ -300,7 +300,7 @@ void console_terminal_back(std::uint32_t slot) {
         if (!send_frame(*k, Frame{kFrameRun, slot, 0, 0}, nullptr)) drop(std::size_t(k - c->consoles.data()));
 }
 
-int console_in(std::uint32_t slot, std::int32_t tid, std::uint32_t owner, char* out, std::uint32_t max) {
+int console_in(std::uint32_t slot, chm_tid_t tid, std::uint32_t owner, char* out, std::uint32_t max) {
     if (!c || slot >= CHM_BP_MAX_SLOTS) return -ENOTTY;
     std::unique_lock<std::mutex> l(c->mu);
     bool asked = false;

@@ -283,7 +283,7 @@ int serve(const HostRequest& h, const char* body, std::uint32_t body_len, std::u
         return console_out(bp::token_slot(owner), body, std::min(body_len, h.text_len));
     case kIn: {
         const std::uint32_t max = std::uint32_t(std::min<std::uint64_t>(h.b, g->room));
-        const int r = console_in(bp::token_slot(owner), h.fd, owner, rep, max);
+        const int r = console_in(bp::token_slot(owner), chm_tid_t(h.a), owner, rep, max);
         if (r > 0) *n = std::uint32_t(r);
         return r;
     }

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "host/hostio.hpp"
+#include "chimera/task.h"
 
 namespace chm::host::server {
 
@@ -69,7 +70,7 @@ int fs_join(const Client& c, const char* path, std::string* out, const char** wh
 int console_start(const char* socket_path);
 void console_stop();
 int console_out(std::uint32_t slot, const char* text, std::uint32_t len);
-int console_in(std::uint32_t slot, std::int32_t tid, std::uint32_t owner, char* out, std::uint32_t max);
+int console_in(std::uint32_t slot, chm_tid_t tid, std::uint32_t owner, char* out, std::uint32_t max);
 // The terminal of the console that owns `slot` (dups into fds; the console
 // is told to let go of it): 0, or -ENOTCONN no console, or none sent its
 // terminal. console_terminal_back tells it the program ended.

@@ -318,7 +318,12 @@ int chm_bp_leave(void) {
                                                         std::memory_order_acq_rel);
     // Withdraw the waiter records of tasks and threads still parked in a
     // backplane wait (an RTPU stopped under them), then drop every
-    // attachment of this slot (ours and any left over).
+    // attachment of this slot (ours and any left over). All of it within
+    // one bound: a live process stalled holding the registry or an object
+    // lock costs a leave (an exit) at most kInternalTimeoutNs; what was
+    // not withdrawn then names a vacated generation (docs/backplane.md,
+    // "Every wait and its bound", says who purges it).
+    const WaitBound bound(kInternalTimeoutNs);
     if (registry_lock(a, a.token) == 0) {
         withdraw_departing(a, a.slot, a.gen, a.token);
         for (std::uint32_t i = 0; i < a.geo().registry_capacity; ++i)

@@ -232,16 +232,51 @@ int open_member_file(std::uint32_t slot, int remote_fd, int* out);
 // slot RECOVERING). Deep: also asks the kernel whether the process lives.
 bool token_alive(const View& v, std::uint32_t token, bool deep);
 
+// A bound on every lock_acquire of this thread while it lives, on top of
+// each call's own timeout: a budget from now, and a flag that, once set
+// (by another thread), ends the thread's lock waits within one polling
+// interval. Scopes nest (the inner one is never looser). lock_acquire
+// answers a wait the scope ended with -ETIMEDOUT. Used where a wait must
+// not outlast its caller's bound: the monitor thread (stopped by
+// chm_bp_leave and fork), a recovery attempt, chm_bp_leave itself.
+struct WaitBound {
+    WaitBound(std::uint64_t budget_ns, const std::atomic<bool>* cancel = nullptr);
+    ~WaitBound();
+    WaitBound(const WaitBound&) = delete;
+    WaitBound& operator=(const WaitBound&) = delete;
+    // Has this thread's innermost scope run out (or been cancelled)?
+    static bool over();
+    std::uint64_t deadline_ns;  // port::now_ns()
+    const std::atomic<bool>* cancel;
+    const WaitBound* outer;
+};
+
 // Acquire `l` for `me` (a token). Tests the lock continuously for the
 // first `poll_ns`, then once every `poll_ns`, giving the CPU away between
 // tests (relinquish). A holder that is dead is robbed: the lock passes to
 // `me` by compare-and-swap from exactly that token.
 // Returns 0; -EOWNERDEAD: acquired, the previous holder died (check
-// l->dirty and repair); -ETIMEDOUT after `timeout_ns` (UINT64_MAX: none).
+// l->dirty and repair); -ETIMEDOUT after `timeout_ns` (UINT64_MAX: none),
+// when the thread's WaitBound ends, or after kTryLockNs with the interrupt
+// mask held (masked_wait).
 int lock_acquire(const View& v, Lock* l, std::uint32_t me, std::uint64_t poll_ns,
                  std::uint64_t timeout_ns);
 // One attempt: 0, -EOWNERDEAD (robbed a dead holder) or -EBUSY.
 int lock_try(const View& v, Lock* l, std::uint32_t me);
+// For the calls that must not wait (the try calls): spins on the lock for
+// at most `spin_ns` (kTryLockNs) and never gives the CPU away, then asks
+// the kernel once whether the holder lives (a dead one is robbed). A live
+// holder's critical section is a few hundred ns, so only a holder that
+// stalls inside one (stopped, preempted, descheduled) makes it fail.
+// 0, -EOWNERDEAD (robbed: check l->dirty and repair) or -EBUSY.
+int lock_acquire_brief(const View& v, Lock* l, std::uint32_t me, std::uint64_t spin_ns);
+// Is the caller on an RTPU's kernel thread with the interrupt mask held
+// (an interrupt handler, a chm_irq_lock section)? Its lock waits are cut
+// to kTryLockNs, spinning: nothing else of the RTPU runs meanwhile.
+bool masked_wait();
+// Who holds `l`, for an error text: "slot 3 (task 65537)", "slot 1
+// (thread 4242)" or "nobody". snprintf's return.
+int lock_holder(const Lock* l, char* out, std::size_t n);
 // lock_acquire for an object's recovery under recovery token `rt`: a lock
 // that `rt` holds already is ours (a recoverer that died mid-recovery held
 // it, and this process took its work over under the same token), returned
@@ -252,8 +287,14 @@ void lock_release(Lock* l);
 // Set before changing the structure a lock guards, clear after.
 void lock_mark_dirty(Lock* l);
 void lock_clear_dirty(Lock* l);
-// Internal locks wait at most this long for a live holder.
+// Internal locks wait at most this long for a live holder (calls that may
+// block: open, create, P, send, receive, ...; docs/backplane.md, "Every
+// wait and its bound").
 inline constexpr std::uint64_t kInternalTimeoutNs = 5'000'000'000ull;
+// A try call waits at most this long for an internal lock, spinning.
+inline constexpr std::uint64_t kTryLockNs = 20'000;
+// A V (chm_rsem_v) waits at most this long for its semaphore's lock.
+inline constexpr std::uint64_t kReleaseLockNs = 10'000'000;
 inline constexpr std::uint64_t kInternalPollNs = 20'000;
 
 // ---------------------------------------------------------------- arenas

@@ -32,8 +32,10 @@ static_assert(sizeof(A32) == 4);
 inline constexpr std::uint32_t kMagic = 0x43484D42;         // "CHMB"
 inline constexpr std::uint32_t kMagicSwapped = 0x424D4843;  // other byte order
 // 3: remote semaphores 64-aligned, grant words apart; 4: a vacant slot's pid
-// word names its generation, the recoverer is one word, STALE mail records.
-inline constexpr std::uint32_t kLayoutVersion = 4;
+// word names its generation, the recoverer is one word, STALE mail records;
+// 5: 64-bit task ids in express-mail requests and replies (xmail.hpp), the
+// 32-bit task words here carry their 31-bit short form (kernel::tid_short).
+inline constexpr std::uint32_t kLayoutVersion = 5;
 inline constexpr std::uint32_t kPage = 4096;
 inline constexpr std::uint32_t kMaxSlots = 32;   // attach masks are uint32_t
 inline constexpr std::uint32_t kMinSlots = 2;
@@ -49,7 +51,7 @@ inline constexpr std::uint64_t kMaxFileSize = 0xFFFFF000u;  // offsets are uint3
 //   token = (slot + 1) << 24 | recovery << 23 | (generation & 0x7FFFFF)
 struct Lock {
     A32 token;        // owner token, 0 = free
-    A32 owner_task;   // task id on that RTPU, or 0x80000000 | Linux tid
+    A32 owner_task;   // task id on that RTPU in 31 bits (kernel::tid_short), or 0x80000000 | Linux tid
     A32 dirty;        // 1 while the holder changes the protected structure
     std::uint32_t reserved;
 };

@@ -12,6 +12,7 @@
 // indivisible read-modify-write bus cycle (`cas.l` on the 68020+,
 // `lock cmpxchg` on x86-64), it just carries the owner's name with it.
 #include <cerrno>
+#include <cstdio>
 
 #include <unistd.h>
 
@@ -85,11 +86,71 @@ int lock_try(const View& v, Lock* l, std::uint32_t me) {
     return -EBUSY;
 }
 
+bool masked_wait() { return port::on_kernel_thread() && port::irq_masked(); }
+
+int lock_acquire_brief(const View& v, Lock* l, std::uint32_t me, std::uint64_t spin_ns) {
+    if (take(l, 0, me) == 0) return 0;
+    const std::uint64_t start = port::now_ns();
+    for (unsigned spins = 1;; ++spins) {
+        const std::uint32_t t = l->token.load(std::memory_order_relaxed);
+        if (t == 0) {
+            if (take(l, 0, me) == 0) return 0;
+            continue;
+        }
+        if (spins & 63) {
+            port::relax();
+            continue;
+        }
+        const bool last = port::now_ns() - start >= spin_ns;
+        // The kernel is asked only once, at the end: it reads /proc.
+        if (!token_alive(v, t, last) && take(l, t, me) == 0) return -EOWNERDEAD;
+        if (last) return -EBUSY;
+    }
+}
+
+int lock_holder(const Lock* l, char* out, std::size_t n) {
+    const std::uint32_t t = l->token.load(std::memory_order_relaxed);
+    const std::uint32_t who = l->owner_task.load(std::memory_order_relaxed);
+    if (t == 0) return std::snprintf(out, n, "nobody");
+    if (who & 0x80000000u)
+        return std::snprintf(out, n, "slot %u (thread %u)", unsigned(token_slot(t)), unsigned(who & 0x7fffffffu));
+    return std::snprintf(out, n, "slot %u (task %u)", unsigned(token_slot(t)), unsigned(who));
+}
+
+namespace {
+thread_local const WaitBound* t_bound = nullptr;  // the innermost scope
+}  // namespace
+
+WaitBound::WaitBound(std::uint64_t budget_ns, const std::atomic<bool>* cancel)
+    : deadline_ns(0), cancel(cancel), outer(t_bound) {
+    const std::uint64_t now = port::now_ns();
+    deadline_ns = budget_ns > UINT64_MAX - now ? UINT64_MAX : now + budget_ns;
+    if (outer && outer->deadline_ns < deadline_ns) deadline_ns = outer->deadline_ns;
+    if (outer && !this->cancel) this->cancel = outer->cancel;
+    t_bound = this;
+}
+WaitBound::~WaitBound() { t_bound = outer; }
+
+bool WaitBound::over() {
+    const WaitBound* b = t_bound;
+    if (!b) return false;
+    return (b->cancel && b->cancel->load(std::memory_order_relaxed)) || port::now_ns() >= b->deadline_ns;
+}
+
 int lock_acquire(const View& v, Lock* l, std::uint32_t me, std::uint64_t poll_ns,
                  std::uint64_t timeout_ns) {
     if (take(l, 0, me) == 0) return 0;  // the uncontended path: one CAS
     if (poll_ns == 0) poll_ns = 10'000;
     const std::uint64_t start = port::now_ns();
+    if (const WaitBound* b = t_bound) {  // the thread's scope may end the wait sooner
+        const std::uint64_t left = b->deadline_ns > start ? b->deadline_ns - start : 0;
+        if (left < timeout_ns) timeout_ns = left;
+    }
+    // With the interrupt mask held (an interrupt handler, a chm_irq_lock
+    // section) nothing else of this RTPU runs while we spin, and nothing
+    // may block: the wait is cut to a try's.
+    const bool masked = masked_wait();
+    if (masked && timeout_ns > kTryLockNs) timeout_ns = kTryLockNs;
     std::uint64_t next_deep = start + 10'000'000;  // ask the kernel about the holder every 10 ms
     for (unsigned spins = 0;; ++spins) {
         const std::uint32_t t = l->token.load(std::memory_order_relaxed);
@@ -110,9 +171,10 @@ int lock_acquire(const View& v, Lock* l, std::uint32_t me, std::uint64_t poll_ns
         if (deep) next_deep = now + 10'000'000;
         if (!token_alive(v, t, deep) && take(l, t, me) == 0) return -EOWNERDEAD;
         if (timeout_ns != UINT64_MAX && now - start >= timeout_ns) return -ETIMEDOUT;
+        if (t_bound && t_bound->cancel && t_bound->cancel->load(std::memory_order_relaxed)) return -ETIMEDOUT;
         // Within the first polling interval, spin; after it, test once per
         // interval and give the CPU away in between.
-        if (now - start >= poll_ns) {
+        if (now - start >= poll_ns && !masked) {
             std::uint64_t nap = poll_ns;
             if (timeout_ns != UINT64_MAX && now - start + nap > timeout_ns) nap = timeout_ns - (now - start);
             relinquish(nap ? nap : 1);

@@ -25,6 +25,11 @@ namespace chm::bp {
 namespace {
 
 constexpr int kPeriodMs = 10;
+// One recovery attempt from this thread waits at most this long for a
+// lock a live process holds; the next scan tries again (any survivor
+// may), so the heartbeat, the other slots and monitor_stop are never held
+// up longer.
+constexpr std::uint64_t kAttemptNs = 100'000'000;
 
 struct Watch {
     std::uint32_t status = 0;  // the status this watch was opened for
@@ -39,6 +44,7 @@ struct Monitor {
     pthread_t thread{};
     int wake_fd = -1;
     bool running = false;
+    std::atomic<bool> stop{false};  // monitor_stop: ends the thread's lock waits too (WaitBound)
     bool no_pidfd = false;
     Watch w[kMaxSlots];
 };
@@ -84,17 +90,23 @@ void arm(Monitor& m, std::uint32_t s, std::uint32_t st) {
     w.pidfd = fd;
 }
 
+void attempt(const View& v, std::uint32_t s, std::uint32_t gen) {
+    WaitBound bound(kAttemptNs);
+    recover_slot(v, s, gen);
+}
+
 void scan(Monitor& m) {
     const View& v = *m.att;
     const std::uint32_t now = mono_ms();
     v.rtpu(m.att->slot)->heartbeat_ms.store(now, std::memory_order_relaxed);
     for (std::uint32_t s = 0; s < v.slots(); ++s) {
+        if (m.stop.load(std::memory_order_relaxed)) return;
         if (s == m.att->slot) continue;
         const std::uint32_t st = v.rtpu(s)->status.load(std::memory_order_acquire);
         const SlotState state = status_state(st);
         if (state == SlotState::Recovering) {
             forget(m.w[s]);
-            if (slot_holder_dead(v, s, st)) recover_slot(v, s, status_gen(st));  // takes over
+            if (slot_holder_dead(v, s, st)) attempt(v, s, status_gen(st));  // takes over
             continue;
         }
         if (state != SlotState::Joining && state != SlotState::Running && state != SlotState::Leaving) {
@@ -116,7 +128,7 @@ void scan(Monitor& m) {
             }
             const std::uint32_t confirm = pid_named(pid) ? kConfirmMs : kUnnamedConfirmMs;
             if (now - w.dead_since < confirm || !joining_abandon(v, s, st, pid)) continue;
-            recover_slot(v, s, status_gen(st));
+            attempt(v, s, status_gen(st));
             forget(w);
             continue;
         }
@@ -125,7 +137,7 @@ void scan(Monitor& m) {
         bool dead = w.gone;
         if (!dead && w.pidfd < 0) dead = slot_holder_dead(v, s, st);  // the /proc fallback
         if (!dead) continue;
-        recover_slot(v, s, status_gen(st));
+        attempt(v, s, status_gen(st));
         forget(w);
     }
 }
@@ -134,7 +146,8 @@ void* run(void*) {
     Monitor& m = g_mon;
     pollfd fds[kMaxSlots + 1];
     std::uint32_t who[kMaxSlots + 1];
-    for (;;) {
+    const WaitBound stoppable(UINT64_MAX, &m.stop);
+    while (!m.stop.load(std::memory_order_relaxed)) {
         scan(m);
         nfds_t n = 0;
         fds[n++] = pollfd{m.wake_fd, POLLIN, 0};
@@ -159,6 +172,7 @@ int monitor_start(Attachment* a) {
     Monitor& m = g_mon;
     if (m.running) return -EBUSY;
     for (auto& w : m.w) w = Watch{};
+    m.stop.store(false);
     m.att = a;
     m.no_pidfd = false;
     m.wake_fd = ::eventfd(0, EFD_CLOEXEC);
@@ -185,6 +199,11 @@ int monitor_start(Attachment* a) {
 void monitor_stop() {
     Monitor& m = g_mon;
     if (!m.running) return;
+    // The flag ends a lock wait of the thread within one polling interval
+    // (lock_acquire), the eventfd its poll; so the join below waits at most
+    // for one step of a scan that does not wait (docs/backplane.md, "Every
+    // wait and its bound").
+    m.stop.store(true);
     const std::uint64_t one = 1;
     (void)!::write(m.wake_fd, &one, sizeof one);
     ::pthread_join(m.thread, nullptr);

@@ -14,6 +14,7 @@
 #include "chimera/kernel.h"
 #include "chimera/task.h"
 #include "ipc/backplane/backplane.hpp"
+#include "kernel.hpp"
 #include "port.hpp"
 
 namespace chm::bp {
@@ -125,7 +126,8 @@ void relinquish(std::uint64_t ns) {
 static thread_local std::uint32_t t_tid = 0;
 
 std::uint32_t task_word() {
-    if (in_chimera_task()) return static_cast<std::uint32_t>(chm_task_self());
+    if (port::on_kernel_thread())  // a task: its id's 31-bit form, the layout's word
+        if (const kernel::Tcb* t = kernel::g_k.current) return kernel::tid_short(t);
     if (!t_tid) t_tid = 0x80000000u | static_cast<std::uint32_t>(::syscall(SYS_gettid));
     return t_tid;
 }

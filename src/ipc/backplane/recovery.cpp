@@ -64,7 +64,11 @@ bool adopt(Lock* l, std::uint32_t d, std::uint32_t rt) {
     return t == d && l->token.compare_exchange_strong(t, rt, std::memory_order_acquire, R);
 }
 
-void do_recover(const View& v, std::uint32_t slot, std::uint32_t gen) {
+// False when the attempt ran out of its bound (recover_slot's WaitBound)
+// waiting for a lock a live process holds: the slot stays RECOVERING and
+// the next survivor to look (a monitor scan, a locker) takes it over;
+// every step is idempotent.
+bool do_recover(const View& v, std::uint32_t slot, std::uint32_t gen) {
     const std::uint32_t d = make_token(slot, gen), rt = make_token(slot, gen, true);
     Header* h = v.hdr();
 
@@ -82,16 +86,19 @@ void do_recover(const View& v, std::uint32_t slot, std::uint32_t gen) {
 
     // 2. The registry: adopt it or wait for its live holder; then repair,
     //    run each kind's recovery and drop the dead slot's attachments.
-    if (!adopt(&h->registry_lock, d, rt)) {
-        while (lock_acquire(v, &h->registry_lock, rt, kInternalPollNs, kInternalTimeoutNs) == -ETIMEDOUT) {
-        }
-    }
+    if (!adopt(&h->registry_lock, d, rt) &&
+        lock_acquire(v, &h->registry_lock, rt, kInternalPollNs, kInternalTimeoutNs) == -ETIMEDOUT)
+        return false;
     registry_repair_locked(v, rt);
     for (std::uint32_t i = 0; i < v.geo().registry_capacity; ++i) {
         RegistryEntry* e = v.entry(i);
         const auto st = static_cast<EntryState>(e->state.load(R));
         if (st == EntryState::Free) continue;
         if (RecoverFn f = recovery_fn(e->kind.load(R))) f(v, i, slot, gen, rt);
+        if (WaitBound::over()) {  // f may have given up on a lock: not finished
+            registry_unlock(v);
+            return false;
+        }
         registry_detach_locked(v, i, slot, rt);
     }
     registry_unlock(v);
@@ -111,6 +118,7 @@ void do_recover(const View& v, std::uint32_t slot, std::uint32_t gen) {
     h->last_recovery_ms.store(mono_ms(), R);
     std::uint32_t st = make_status(gen, SlotState::Recovering);
     e->status.compare_exchange_strong(st, make_status(gen, SlotState::Dead), std::memory_order_acq_rel);
+    return true;
 }
 
 }  // namespace
@@ -172,7 +180,13 @@ bool recover_slot(const View& v, std::uint32_t slot, std::uint32_t gen) {
              e->status.compare_exchange_strong(st, make_status(gen, SlotState::Recovering),
                                                std::memory_order_acq_rel);
     }
-    if (go) do_recover(v, slot, gen);
+    if (go) {
+        // Bounded: a live process holding a lock the recovery needs (it
+        // stalled inside a call) holds it up at most this long, then it is
+        // left to the next survivor (do_recover).
+        WaitBound bound(kInternalTimeoutNs);
+        go = do_recover(v, slot, gen);
+    }
     release();
     return go;
 }

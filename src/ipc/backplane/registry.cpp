@@ -15,6 +15,7 @@
 
 #include "chimera/bp.h"
 #include "ipc/backplane/backplane.hpp"
+#include "ipc/backplane/stop_point.hpp"
 
 namespace chm::bp {
 
@@ -104,6 +105,7 @@ int registry_lock(const View& v, std::uint32_t me) {
     const int r = lock_acquire(v, l, me, kInternalPollNs, kInternalTimeoutNs);
     if (r == -ETIMEDOUT) return r;
     if (r == -EOWNERDEAD && l->dirty.load(std::memory_order_acquire)) registry_repair_locked(v, me);
+    CHM_STOP_POINT("bp.registry.locked");
     return 0;
 }
 

@@ -176,8 +176,12 @@ struct WakeBuf : Wakes {
 
 // Lock the queue for `me`. A lock robbed from a dead holder that left the
 // queue mid-change is rebuilt first. 0; -EDEADLK a live holder kept it
-// past the bound; -ENOTRECOVERABLE broken (the lock is not held then).
-int lock_queue(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t me);
+// past bp::kInternalTimeoutNs; with a send's or receive's `limit`: for
+// CHM_NO_WAIT (a try call) -EAGAIN a live holder kept it past
+// bp::kTryLockNs, for a timeout or deadline nearer than 5 s -ETIMEDOUT it
+// was held past that; -ENOTRECOVERABLE broken (the lock is not held then).
+int lock_queue(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t me,
+               const WaitLimit* limit = nullptr);
 void unlock_queue(QueueHeader* q);
 
 // With the lock held: grant the most urgent ungranted waiter of `state`

@@ -10,6 +10,7 @@
 #include "chimera/bp.h"
 #include "chimera/kernel.h"
 #include "chimera/task.h"
+#include "ipc/backplane/stop_point.hpp"
 #include "ipc/err/report.hpp"
 #include "ipc/msgq/msgq.hpp"
 #include "ipc/wake/wake.hpp"
@@ -209,8 +210,9 @@ struct RecvOp {
 // The whole operation, lock to unlock.
 template <class Op>
 int run(const bp::Attachment* a, QueueHeader* q, const Geo& g, const Op& op, WaitLimit limit) {
-    int r = lock_queue(*a, q, g, a->token);
+    int r = lock_queue(*a, q, g, a->token, &limit);
     if (r) return r;
+    CHM_STOP_POINT("msgq.run.locked");
     WakeBuf<2> wakes;
     // The path that needs no wait.
     if (!q->destroyed.load(R) && op.ready(q, g)) {
@@ -337,11 +339,29 @@ void Wakes::deliver() {
     n = 0;
 }
 
-int lock_queue(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t me) {
-    const int r = bp::lock_acquire(v, &q->lock, me, kLockPollNs, bp::kInternalTimeoutNs);
+int lock_queue(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t me, const WaitLimit* limit) {
+    bool own = false;  // the call's own timeout is the bound
+    const std::uint64_t bound = limit ? limit->lock_budget(bp::kInternalTimeoutNs, &own) : bp::kInternalTimeoutNs;
+    const bool try_call = limit && limit->kind == WaitLimit::kNoWait;
+    const int r = bound == 0 ? bp::lock_acquire_brief(v, &q->lock, me, bp::kTryLockNs)
+                             : bp::lock_acquire(v, &q->lock, me, kLockPollNs, bound);
+    if (r == -EBUSY && try_call) {
+        char who[48];
+        bp::lock_holder(&q->lock, who, sizeof who);
+        bp::set_error("message queue: its lock is held by %s, a live peer: a try call does not wait", who);
+        return -EAGAIN;
+    }
+    if (r == -EBUSY || (r == -ETIMEDOUT && own)) {  // a deadline reached, or the call's timeout ran out
+        char who[48];
+        bp::lock_holder(&q->lock, who, sizeof who);
+        bp::set_error("message queue: its lock was held by %s, a live peer, past the call's timeout", who);
+        return -ETIMEDOUT;
+    }
     if (r == -ETIMEDOUT) {
-        bp::set_error("message queue: its lock was held past %llu ms by a live peer",
-                      static_cast<unsigned long long>(bp::kInternalTimeoutNs / 1000000));
+        char who[48];
+        bp::lock_holder(&q->lock, who, sizeof who);
+        bp::set_error("message queue: its lock was held by %s, a live peer, past %s", who,
+                      bp::masked_wait() ? "20 us (interrupts masked)" : "5 s");
         return -EDEADLK;
     }
     if (r == -EOWNERDEAD) {

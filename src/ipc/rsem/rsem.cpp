@@ -15,6 +15,7 @@
 #include "chimera/shm.h"
 #include "chimera/task.h"
 #include "ipc/backplane/backplane.hpp"
+#include "ipc/backplane/stop_point.hpp"
 #include "ipc/wake/wake.hpp"
 #include "ipc/err/report.hpp"
 #include "kernel/sync/remote_wait.hpp"
@@ -125,17 +126,55 @@ void repair_locked(Rsem* s) {
     if (s->kind.load() == CHM_SEM_BINARY && s->count.load() > 1) s->count.store(1);
 }
 
-int lock(Rsem* s) {
+// How long a call waits for the semaphore's lock held by a live process
+// (docs/backplane.md, "Every wait and its bound").
+enum class LockWait {
+    kBlocking,  // kInternalTimeoutNs (5 s), then -EDEADLK
+    kTry,       // kTryLockNs (20 µs) spinning, then -EAGAIN: a try never waits
+    kRelease,   // kReleaseLockNs (10 ms), then -EBUSY: a V is not held up for seconds
+    kTimed,     // what is left of the call's timeout (< 5 s), then -ETIMEDOUT
+};  // With the interrupt mask held, each is cut to kTryLockNs (masked_wait).
+
+// The lock wait of a P with `limit`.
+LockWait p_wait(const chm::ipc::WaitLimit& limit, std::uint64_t* budget) {
+    bool own = false;
+    *budget = limit.lock_budget(kInternalTimeoutNs, &own);
+    if (limit.kind == chm::ipc::WaitLimit::kNoWait) return LockWait::kTry;
+    return own ? LockWait::kTimed : LockWait::kBlocking;
+}
+
+int lock(Rsem* s, LockWait wait = LockWait::kBlocking, std::uint64_t budget = 0) {
     Attachment* a = current();
-    int r = lock_acquire(*a, &s->lock, a->token, kInternalPollNs, kInternalTimeoutNs);
+    const std::uint64_t bound = wait == LockWait::kRelease  ? kReleaseLockNs
+                                : wait == LockWait::kTimed ? budget
+                                                           : kInternalTimeoutNs;
+    int r = wait == LockWait::kTry || bound == 0
+                ? lock_acquire_brief(*a, &s->lock, a->token, kTryLockNs)
+                : lock_acquire(*a, &s->lock, a->token, kInternalPollNs, bound);
     if (r == -EOWNERDEAD) {
         repair_locked(s);
         lock_clear_dirty(&s->lock);
         r = 0;
     }
-    if (r == -ETIMEDOUT) {
-        set_error("remote semaphore: its lock was held past 5 s by a live process");
-        return -EDEADLK;
+    if (r == -ETIMEDOUT || r == -EBUSY) {
+        char who[48];
+        lock_holder(&s->lock, who, sizeof who);
+        if (wait == LockWait::kTry) {
+            set_error("remote semaphore: its lock is held by %s, a live process: a try call does not wait", who);
+            return -EAGAIN;
+        }
+        // With the interrupt mask held every wait is a try's (masked_wait).
+        const char* past = masked_wait() ? "20 us (interrupts masked)"
+                           : wait == LockWait::kRelease ? "10 ms"
+                           : wait == LockWait::kTimed   ? "the call's timeout"
+                                                        : "5 s";
+        if (wait == LockWait::kRelease) {
+            set_error("remote semaphore: its lock was held by %s, a live process, past %s: the unit was not given",
+                      who, past);
+            return -EBUSY;
+        }
+        set_error("remote semaphore: its lock was held by %s, a live process, past %s", who, past);
+        return wait == LockWait::kTimed ? -ETIMEDOUT : -EDEADLK;
     }
     if (r == 0 && s->broken.load()) {
         lock_release(&s->lock);
@@ -375,7 +414,9 @@ static int rsem_p_impl(chm_rsem_t* h, WaitLimit limit) {
     Rsem* s = from_handle(h);
     if (!s) return set_error("chm_rsem_p: not a remote semaphore handle"), -EINVAL;
     Attachment* a = current();
-    if (int r = lock(s)) return r;
+    std::uint64_t budget;
+    const LockWait how = p_wait(limit, &budget);
+    if (int r = lock(s, how, budget)) return r;
     if (s->count.load() > 0) {  // the fast path: one lock, no system call
         s->count.store(s->count.load(std::memory_order_relaxed) - 1, std::memory_order_relaxed);  // lock held
         unlock(s);
@@ -448,7 +489,8 @@ static int rsem_p_impl(chm_rsem_t* h, WaitLimit limit) {
 static int rsem_v_impl(chm_rsem_t* h) {
     Rsem* s = from_handle(h);
     if (!s) return set_error("chm_rsem_v: not a remote semaphore handle"), -EINVAL;
-    if (int r = lock(s)) return r;
+    if (int r = lock(s, LockWait::kRelease)) return r;
+    CHM_STOP_POINT("rsem.v.locked");
     Waiter* w = nullptr;
     const int r = give_locked(s, &w);
     std::uint32_t slot = 0;

@@ -98,6 +98,18 @@ WaitLimit wait_until(std::uint64_t deadline_ns) {
     return WaitLimit{WaitLimit::kUntil, deadline_ns};
 }
 
+std::uint64_t WaitLimit::lock_budget(std::uint64_t cap, bool* own) const {
+    std::uint64_t left = cap;
+    if (kind == kNoWait) left = 0;
+    if (kind == kFor) left = ns;
+    if (kind == kUntil) {
+        const std::uint64_t now = chm_time_now();
+        left = ns > now ? ns - now : 0;
+    }
+    if (own) *own = kind != kForever && left < cap;
+    return left < cap ? left : cap;
+}
+
 std::uint64_t WaitLimit::deadline() const {
     switch (kind) {
     case kForever: return CHM_FOREVER;

@@ -50,6 +50,12 @@ struct WaitLimit {
     // The deadline on wait_now()'s clock; UINT64_MAX: none; kNoWait: 0, past
     // (callers fail with -EAGAIN before they get here).
     std::uint64_t deadline() const;
+    // How long the call may still wait for an internal lock, in real time:
+    // the time left of a timeout or a deadline (a virtual clock's counted
+    // as real time), at most `cap`; 0 for kNoWait and a deadline reached;
+    // `cap` for kForever. *own (may be NULL): true when the call's own
+    // limit, not `cap`, is the bound (its end is then -ETIMEDOUT).
+    std::uint64_t lock_budget(std::uint64_t cap, bool* own) const;
 };
 // CHM_NO_WAIT (0) gives kNoWait, CHM_FOREVER kForever.
 WaitLimit wait_for(std::uint64_t timeout_ns);

@@ -96,7 +96,7 @@ int chm_rtpu_spawn(int rtpu, const char* path, int argc, const char* const* argv
     std::uint32_t n = 0;
     const int r = call(rtpu, kSpawn, req, std::uint32_t(off), reply, sizeof reply - 1, &n, chm_rtpu_timeout());
     std::free(req);
-    SpawnReply rep{CHM_TID_NONE, -1};
+    SpawnReply rep{CHM_TID_NONE, -1, 0};
     if (n >= sizeof rep) std::memcpy(&rep, reply, sizeof rep);
     if (r < 0) {
         if (!chm_rtpu_last_error()[0]) {
@@ -116,7 +116,7 @@ int chm_rtpu_spawn(int rtpu, const char* path, int argc, const char* const* argv
 int chm_rtpu_signal(int rtpu, chm_tid_t task, int signo) {
     set_error("%s", "");
     if (signo < 1 || signo > CHM_USIG_MAX) return fail(-EINVAL, "signal number outside 1..31");
-    TaskRequest q{task, signo};
+    TaskRequest q{task, signo, 0};
     char reply[kReplyMax];
     std::uint32_t n = 0;
     return remote(rtpu, kSignal, &q, sizeof q, reply, &n, chm_rtpu_timeout());
@@ -124,7 +124,7 @@ int chm_rtpu_signal(int rtpu, chm_tid_t task, int signo) {
 
 int chm_rtpu_destroy(int rtpu, chm_tid_t task) {
     set_error("%s", "");
-    TaskRequest q{task, 0};
+    TaskRequest q{task, 0, 0};
     char reply[kReplyMax];
     std::uint32_t n = 0;
     return remote(rtpu, kDestroy, &q, sizeof q, reply, &n, chm_rtpu_timeout());
@@ -140,8 +140,8 @@ int chm_rtpu_find(int rtpu, const char* name, chm_tid_t* tid) {
     std::uint32_t n = 0;
     const int r = remote(rtpu, kFind, &q, sizeof q, reply, &n, chm_rtpu_timeout());
     if (r < 0) return r;
-    if (n < sizeof(std::int32_t)) return fail(-EPROTO, "short find reply");
-    std::int32_t id;
+    if (n < sizeof(std::int64_t)) return fail(-EPROTO, "short find reply");
+    std::int64_t id;
     std::memcpy(&id, reply, sizeof id);
     *tid = id;
     return 0;

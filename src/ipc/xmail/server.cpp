@@ -71,7 +71,7 @@ int do_spawn(const char* req, std::uint32_t len, char* rep, std::uint32_t* n, st
     if (int e = decode_spawn(req, len, &args)) return e;
     chm_tid_t tid = CHM_TID_NONE;
     const int prog = chm_program_load(args.path, args.argc, args.argv, nullptr, &tid);
-    SpawnReply out{tid, prog};
+    SpawnReply out{tid, prog, 0};
     std::memcpy(rep, &out, sizeof out);
     *n = sizeof out;
     if (prog < 0) {
@@ -109,7 +109,7 @@ int do_find(const char* req, std::uint32_t len, char* rep, std::uint32_t* n) {
     f.name[CHM_TASK_NAME_MAX] = 0;
     chm_tid_t tid = CHM_TID_NONE;
     if (int e = chm_task_find(f.name, &tid)) return e;
-    std::int32_t out = tid;
+    std::int64_t out = tid;
     std::memcpy(rep, &out, sizeof out);
     *n = sizeof out;
     return 0;

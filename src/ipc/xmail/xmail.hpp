@@ -84,13 +84,15 @@ struct SpawnRequest {
 };
 // SpawnReply, then the loader's message (NUL-terminated) when it failed.
 struct SpawnReply {
-    std::int32_t tid;
+    std::int64_t tid;  // chm_tid_t
     std::int32_t program;
+    std::int32_t pad;
 };
 
 struct TaskRequest {  // kSignal, kDestroy
-    std::int32_t tid;
+    std::int64_t tid;  // chm_tid_t
     std::int32_t signo;
+    std::int32_t pad;
 };
 
 struct FindRequest {
@@ -105,12 +107,13 @@ struct TasksRequest {
 // TasksReply::entry_size, so a sender and a server built from different
 // versions of this struct refuse each other's pages (-EPROTO) instead of
 // reading one layout as the other. 80 bytes until the worst-case figures
-// were added.
+// were added, 128 until task ids became 64 bits.
 struct TaskEntry {
-    std::int32_t id;
+    std::int64_t id;  // chm_tid_t
     std::uint32_t state;
     std::int32_t priority;
     std::uint32_t critical;
+    std::uint32_t pad;
     std::uint64_t period_ns, cpu_ns, cycles, misses;
     std::uint64_t deadline_ns, wcet_ns;   // relative deadline, CPU estimate per cycle
     std::uint64_t worst_lateness_ns;      // worst completion after the deadline
@@ -118,7 +121,7 @@ struct TaskEntry {
     std::uint64_t stack_size, stack_high_water;  // bytes
     char name[CHM_TASK_NAME_MAX + 1];
 };
-static_assert(sizeof(TaskEntry) == 128);
+static_assert(sizeof(TaskEntry) == 136);
 // TasksReply, then `count` TaskEntry.
 struct TasksReply {
     std::uint32_t total;  // tasks alive

@@ -233,14 +233,13 @@ void chm_kernel_fini(void) {
     g_k.tcbs = tcbs;
     g_k.rq = rq;
     g_k.timers = timers;
-    // Slots keep their generation so stale ids never match a new task.
+    // Slots keep their generation so stale ids never match a new task;
+    // retired ones (kGenMax) stay off the free list.
+    g_k.tcb_hw = hw;
     for (std::uint32_t i = 0; i < hw; ++i) {
         tcbs[i].used = false;
-        tcbs[i].next_free = i + 1 < hw ? std::int32_t(i + 1) : -1;
+        slot_release_locked(&tcbs[i]);  // in slot order, as before
     }
-    g_k.tcb_hw = hw;
-    g_k.free_slot = hw ? 0 : -1;
-    g_k.free_tail = hw ? std::int32_t(hw - 1) : -1;
 }
 
 }  // extern "C"

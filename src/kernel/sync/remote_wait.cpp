@@ -25,7 +25,7 @@ int remote_waiter_priority() {
 
 namespace {
 
-std::uint32_t task_id(const Tcb* t) { return std::uint32_t(tid_of(t)) + 1; }
+std::uint32_t task_id(const Tcb* t) { return tid_short(t) + 1; }  // a 32-bit shared word
 
 // A task's place in its RTPU's order as one number another process can
 // compare (port::RingFor): a grant interrupts the running task when the

@@ -41,7 +41,7 @@ void complete_cycle_locked(Tcb* t, std::uint64_t now) {
 
 void deliver_deadline_miss_locked(Tcb* cur) {
     cur->miss_pending = false;
-    chm_deadline_info_t info{chm_tid_t(cur->index | (std::uint32_t(cur->gen) << 16)),
+    chm_deadline_info_t info{tid_of(cur),
                              cur->missed_cycle, cur->missed_deadline, now_locked(),
                              cur->misses, cur->misses_unhandled};
     cur->misses_unhandled = 0;

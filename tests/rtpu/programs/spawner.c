@@ -28,7 +28,7 @@ int main(int argc, char **argv) {
     const int self = chm_rtpu_ping(chm_bp_self(), NULL);
     FILE *f = fopen(argv[4], "w");
     if (!f) return 1;
-    fprintf(f, "spawn %d %d\ntasks %d %d\nsignal %d\nself %d\n", r, (int)tid, n, found, s, self);
+    fprintf(f, "spawn %d %lld\ntasks %d %d\nsignal %d\nself %d\n", r, (long long)tid, n, found, s, self);
     fclose(f);
     return 0;
 }
