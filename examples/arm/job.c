@@ -131,7 +131,11 @@ static int do_switch(const int* off, const int* on) {
     for (; *on >= 0; ++on) n[nn++] = g_mod[*on];
     const uint64_t before = misses(0), t_req = now_ns();
     uint64_t at = 0;
-    const int r = chm_servo_switch(o, no, n, nn, 0, &at);
+    int r;
+    /* -ETIME: a commit came too late for the instant, so nothing switched
+     * anywhere (a switch is all or nothing): ask again. */
+    for (int tries = 0; (r = chm_servo_switch(o, no, n, nn, 0, &at)) == -ETIME && tries < 20; ++tries)
+        fprintf(stderr, "job: switch %d refused whole (%s), asking again\n", g_nsw + 1, chm_err_last());
     if (r != 0) {
         fprintf(stderr, "job: switch %d refused (%s): %s\n", g_nsw + 1, strerror(-r), chm_err_last());
         return -1;
@@ -144,7 +148,10 @@ static int do_switch(const int* off, const int* on) {
 static int start_system(void) {
     const uint64_t before = misses(0), t_req = now_ns();
     uint64_t at = 0;
-    if (chm_servo_system_start(g_sys, &at) != 0) {
+    int r;
+    for (int tries = 0; (r = chm_servo_system_start(g_sys, &at)) == -ETIME && tries < 20; ++tries)
+        fprintf(stderr, "job: start refused whole (%s), asking again\n", chm_err_last());
+    if (r != 0) {
         fprintf(stderr, "job: start: %s\n", chm_err_last());
         return -1;
     }

@@ -89,6 +89,22 @@ protected:
         }
         return false;
     }
+    // chm_servo_switch, asked again while it is refused whole because a
+    // commit came too late for its instant (-ETIME: a loaded machine) or
+    // a module is still finishing its last cycle (-EALREADY), for up to
+    // 60 s: a refused switch changed nothing. The last status otherwise.
+    static int switch_until_done(const chm_servo_module_t* off, size_t n_off, const chm_servo_module_t* on,
+                                 size_t n_on, std::uint64_t* at) {
+        const std::uint64_t end = now_ms() + 60000;
+        int r;
+        while ((r = chm_servo_switch(off, n_off, on, n_on, 0, at)) == -ETIME || r == -EALREADY) {
+            if (now_ms() > end) break;
+            nap_ms(1);
+        }
+        return r;
+    }
+    static int on_until_done(chm_servo_module_t m) { return switch_until_done(nullptr, 0, &m, 1, nullptr); }
+    static int off_until_done(chm_servo_module_t m) { return switch_until_done(&m, 1, nullptr, 0, nullptr); }
     static double get(const char* name) {
         double v = NAN;
         EXPECT_EQ(chm_svar_get(name, &v, sizeof v), 0);

@@ -28,7 +28,7 @@ TEST_F(Servo, AModuleRunsItsCyclesAndStops) {
     ASSERT_EQ(chm_servo_find(-1, "c1", &found), 0);
     EXPECT_EQ(found.rtpu, 1);
     EXPECT_EQ(found.gen, m.gen);
-    ASSERT_EQ(chm_servo_on(m), 0) << chm_servo_last_error();
+    ASSERT_EQ(on_until_done(m), 0) << chm_servo_last_error();
     EXPECT_EQ(status(m).state, CHM_SERVO_ON);
     const std::uint64_t end = now_ms() + 5000;
     while (status(m).cycles < 20 && now_ms() < end) nap_ms(2);
@@ -44,7 +44,7 @@ TEST_F(Servo, AModuleRunsItsCyclesAndStops) {
     EXPECT_EQ(std::fmod(get("v"), 1000.0), 9.0) << "control takes effect before a next cycle";
     EXPECT_EQ(chm_servo_control(m, "id", 1000), -ERANGE);
     EXPECT_EQ(chm_servo_control(m, "gain", 1), -ESRCH);
-    ASSERT_EQ(chm_servo_off(m), 0) << chm_servo_last_error();
+    ASSERT_EQ(off_until_done(m), 0) << chm_servo_last_error();
     ASSERT_TRUE(wait_state(m, CHM_SERVO_OFF));
     const std::uint64_t c = status(m).cycles;
     nap_ms(20);
@@ -84,7 +84,7 @@ TEST_F(Servo, BadModulesAndRequestsAreRefusedByName) {
     EXPECT_NE(std::string(chm_servo_last_error()).find("v would be written by both c and c2"), std::string::npos)
         << chm_servo_last_error();
     EXPECT_EQ(status(m).state, CHM_SERVO_OFF);
-    ASSERT_EQ(chm_servo_on(m), 0);
+    ASSERT_EQ(on_until_done(m), 0);
     EXPECT_EQ(chm_servo_on(other), -EBUSY) << "c writes v";
     EXPECT_NE(std::string(chm_servo_last_error()).find("written by c"), std::string::npos) << chm_servo_last_error();
     EXPECT_EQ(chm_servo_on(m), -EALREADY);
@@ -100,7 +100,7 @@ TEST_F(Servo, AFaultyModuleGoesToErrorAndNothingElseStops) {
     make_log("c1");
     chm_servo_module_t c, f;
     ASSERT_EQ(spawn(1, COUNTER_SO, "c1", 2 * kMs, &c), 0) << chm_servo_last_error();
-    ASSERT_EQ(chm_servo_on(c), 0);
+    ASSERT_EQ(on_until_done(c), 0);
     // init that fails or faults: not created, the RTPU and c1 go on.
     EXPECT_EQ(spawn(1, FAULTY_SO, "f", 2 * kMs, &f, {{"where", 1}}), -ECANCELED);
     EXPECT_NE(std::string(chm_servo_last_error()).find("init returned 3"), std::string::npos) << chm_servo_last_error();
@@ -116,7 +116,7 @@ TEST_F(Servo, AFaultyModuleGoesToErrorAndNothingElseStops) {
     for (int where : {3, 4}) {
         SCOPED_TRACE(where);
         ASSERT_EQ(spawn(2, FAULTY_SO, "f", 2 * kMs, &f, {{"where", where}, {"at", 3}}), 0) << chm_servo_last_error();
-        ASSERT_EQ(chm_servo_on(f), 0) << chm_servo_last_error();
+        ASSERT_EQ(on_until_done(f), 0) << chm_servo_last_error();
         ASSERT_TRUE(wait_state(f, CHM_SERVO_ERROR)) << status(f).last_error;
         const chm_servo_status_t st = status(f);
         EXPECT_EQ(st.cycles, 2u) << "cycles 1 and 2 completed";
@@ -129,7 +129,7 @@ TEST_F(Servo, AFaultyModuleGoesToErrorAndNothingElseStops) {
         ASSERT_EQ(chm_servo_clear(f), 0) << chm_servo_last_error();
         EXPECT_EQ(status(f).state, CHM_SERVO_OFF);
         ASSERT_EQ(chm_servo_control(f, "where", 0), 0);
-        ASSERT_EQ(chm_servo_on(f), 0) << chm_servo_last_error();
+        ASSERT_EQ(on_until_done(f), 0) << chm_servo_last_error();
         const std::uint64_t end = now_ms() + 5000;
         while (status(f).cycles < 10 && now_ms() < end) nap_ms(2);
         EXPECT_GE(status(f).cycles, 10u);
@@ -149,7 +149,7 @@ TEST_F(Servo, ADeadRtpusModulesAreSeenDeadAndCanMove) {
     make_log("c");
     chm_servo_module_t m;
     ASSERT_EQ(spawn(2, COUNTER_SO, "c", 2 * kMs, &m), 0) << chm_servo_last_error();
-    ASSERT_EQ(chm_servo_on(m), 0);
+    ASSERT_EQ(on_until_done(m), 0);
     kill(pid_[2], SIGKILL);
     const std::uint64_t t0 = now_ms();
     ASSERT_TRUE(wait_state(m, CHM_SERVO_DEAD, 10000));
@@ -157,7 +157,7 @@ TEST_F(Servo, ADeadRtpusModulesAreSeenDeadAndCanMove) {
                  (unsigned long long)(now_ms() - t0));
     chm_servo_module_t moved;
     ASSERT_EQ(spawn(1, COUNTER_SO, "c", 2 * kMs, &moved), 0) << chm_servo_last_error();
-    ASSERT_EQ(chm_servo_on(moved), 0) << chm_servo_last_error();
+    ASSERT_EQ(on_until_done(moved), 0) << chm_servo_last_error();
     const std::uint64_t end = now_ms() + 5000;
     while (status(moved).cycles < 5 && now_ms() < end) nap_ms(2);
     EXPECT_GE(status(moved).cycles, 5u);
@@ -175,7 +175,7 @@ TEST_F(Servo, EverySwitchedCycleHasExactlyOneWriter) {
     ASSERT_EQ(spawn(1, COUNTER_SO, "c1", 2 * kMs, &c1, {{"id", 1}}), 0) << chm_servo_last_error();
     ASSERT_EQ(spawn(2, COUNTER_SO, "c2", 2 * kMs, &c2, {{"id", 2}}), 0) << chm_servo_last_error();
     std::uint64_t first_at = 0;
-    ASSERT_EQ(chm_servo_switch(nullptr, 0, &c1, 1, 0, &first_at), 0) << chm_servo_last_error();
+    ASSERT_EQ(switch_until_done(nullptr, 0, &c1, 1, &first_at), 0) << chm_servo_last_error();
     int done = 0, refused_late = 0, busy = 0;
     std::uint64_t at = first_at;
     const std::uint64_t deadline = now_ms() + 480'000;
@@ -198,7 +198,7 @@ TEST_F(Servo, EverySwitchedCycleHasExactlyOneWriter) {
     ASSERT_GE(done, std::min(switches, 100)) << "switches done in time";
     chm_servo_module_t last = done % 2 ? c2 : c1;
     std::uint64_t end_at = 0;
-    ASSERT_EQ(chm_servo_switch(&last, 1, nullptr, 0, 0, &end_at), 0) << chm_servo_last_error();
+    ASSERT_EQ(switch_until_done(&last, 1, nullptr, 0, &end_at), 0) << chm_servo_last_error();
     ASSERT_TRUE(wait_state(c1, CHM_SERVO_OFF));
     ASSERT_TRUE(wait_state(c2, CHM_SERVO_OFF));
     std::fprintf(stderr, "%d switches (%d refused for a late commit, %d retried while a module finished)\n", done,
@@ -222,7 +222,10 @@ TEST_F(Servo, EverySwitchedCycleHasExactlyOneWriter) {
     // switched off again at that same instant, before running any).
     EXPECT_EQ(std::min(*k1.begin(), *k2.begin()), k_first);
     const std::uint64_t last_k = std::max(*k1.rbegin(), *k2.rbegin());
-    EXPECT_EQ(last_k + 1, k_end) << "the last cycle is the one before the last switch's instant";
+    EXPECT_EQ(last_k + 1, k_end) << "the last cycle is the one before the last switch's instant; cycles at or after "
+                                    "it: c1 " << std::count_if(k1.begin(), k1.end(), [&](auto k) { return k >= k_end; })
+                                 << ", c2 " << std::count_if(k2.begin(), k2.end(), [&](auto k) { return k >= k_end; })
+                                 << "; the last one on was " << (done % 2 ? "c2" : "c1");
     // Misses are the machine's, not the switch's: reported, not judged.
     std::fprintf(stderr, "deadline misses: c1 %llu, c2 %llu\n", (unsigned long long)status(c1).misses,
                  (unsigned long long)status(c2).misses);

@@ -65,7 +65,7 @@ TEST_F(Servo, ASwitchOneRtpuCannotCommitInTimeSwitchesNothingAnywhere) {
     ASSERT_EQ(spawn(3, COUNTER_SO, "c3", period, &c3, {{"id", 4}}), 0) << chm_servo_last_error();
     const chm_servo_module_t first_on[] = {c1, d1};
     std::uint64_t started = 0;
-    ASSERT_EQ(chm_servo_switch(nullptr, 0, first_on, 2, 0, &started), 0) << chm_servo_last_error();
+    ASSERT_EQ(switch_until_done(nullptr, 0, first_on, 2, &started), 0) << chm_servo_last_error();
 
     // Let RTPU 3 go on well after T: T is a few ms after the prepares.
     std::atomic<bool> held{false};
@@ -105,7 +105,7 @@ TEST_F(Servo, ASwitchOneRtpuCannotCommitInTimeSwitchesNothingAnywhere) {
 
     // The same switch now (RTPU 3 stops only once) happens everywhere, at
     // one instant: each variable's writers meet there, without a gap.
-    ASSERT_EQ(chm_servo_switch(off, 2, on, 2, 0, &at), 0) << chm_servo_last_error();
+    ASSERT_EQ(switch_until_done(off, 2, on, 2, &at), 0) << chm_servo_last_error();
     EXPECT_TRUE(wait_state(c1, CHM_SERVO_OFF));
     EXPECT_TRUE(wait_state(d1, CHM_SERVO_OFF));
     EXPECT_EQ(status(c3).state, CHM_SERVO_ON);

@@ -113,9 +113,10 @@ int switch_impl(const chm_servo_module_t* off, size_t n_off, const chm_servo_mod
                 return say("chm_servo_switch: module %d:%d listed twice", all[i].rtpu, all[i].index), -EINVAL;
     // Names, periods and outputs of everything involved.
     std::vector<StatusReply> st(all.size());
-    std::uint64_t common = 1;
+    std::uint64_t common = 1, pending = 0;
     for (std::size_t i = 0; i < all.size(); ++i) {
         if (int r = status_of(all[i], &st[i])) return r;
+        pending = std::max(pending, st[i].pending_at);
         const std::uint64_t p = st[i].period_ns;
         common = common / gcd(common, p) * p;
         if (common > kMaxCommonPeriodNs)
@@ -191,8 +192,10 @@ int switch_impl(const chm_servo_module_t* off, size_t n_off, const chm_servo_mod
                -EBUSY;
     const std::uint64_t prep = now_ns() - t0;
     const std::uint64_t lead = std::max(kMinLeadNs, 4 * prep);
+    // Never before an instant an earlier switch armed one of these modules
+    // for: a switch asked for later never takes effect first.
     const std::uint64_t now = now_ns();  // CLOCK_MONOTONIC: the RTPU kernels' clock
-    const std::uint64_t at = (now + lead + common - 1) / common * common;
+    const std::uint64_t at = (std::max(now + lead, pending) + common - 1) / common * common;
     // Tell every part the outcome; the cell is given back only when all
     // of them know it (a part that did not answer may still read it).
     auto resolve_all = [&](std::uint32_t outcome) {

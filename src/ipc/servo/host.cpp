@@ -1,6 +1,7 @@
 // The module table of one RTPU: loading a module and checking its
 // descriptor, parameters, entry points run in tasks of their own, ERROR,
 // kill, and the calls module code makes (chimera/module.h).
+#include <algorithm>
 #include <cerrno>
 #include <climits>
 #include <cmath>
@@ -346,6 +347,9 @@ void status(const chm_module* m, StatusReply* out) {
     out->misses = m->misses;
     out->worst_ns = m->worst_ns;
     out->switched_at = m->switched_at;
+    // An instant an earlier switch armed this module for (on, or off),
+    // which a later switch must not precede.
+    out->pending_at = std::max(m->on_at, m->off_at());
     std::memcpy(out->last_error, m->last_error, sizeof out->last_error);
     out->last_error[sizeof out->last_error - 1] = 0;
 }

@@ -83,6 +83,7 @@ struct StatusReply {
     std::int32_t state;
     std::uint32_t pad;
     std::uint64_t period_ns, cycles, misses, worst_ns, switched_at;
+    std::uint64_t pending_at;  // the latest instant an earlier switch armed it for (0: none)
     char last_error[160];
 };
 
