@@ -80,6 +80,11 @@ struct Case {
 
 std::string verify_queue();
 std::string verify_sem();
+std::string verify_shm();
+std::string verify_vseg();
+void* g_victim_addr;
+std::uint32_t g_refs;  // this process's attaches of "fseg"
+bool g_vseg;           // "vseg" must exist
 
 void fill(std::uint32_t n) {
     for (std::uint32_t i = 0; i < n; ++i) {
@@ -156,6 +161,27 @@ const Case kCases[] = {
          if (deferred(a)) ++g_units;  // the V completed first
      },
      next_v, verify_sem},
+    // Segment "fseg" (made by the parent): the victim attaches it.
+    {"shm.attach.locked", [] {}, [] { (void)chm_shm_attach("fseg", &g_victim_addr, nullptr); },
+     [](Action a) {
+         if (deferred(a)) ++g_refs;  // the attach completed first: the process holds one more
+     },
+     [] {
+         void* p = nullptr;
+         if (chm_shm_attach("fseg", &p, nullptr) != 0) return -1;
+         return chm_shm_detach(p);
+     },
+     verify_shm},
+    // A new segment "vseg": the registry entry half written.
+    {"registry.create.locked", [] {}, [] { (void)chm_shm_create("vseg", 64, CHM_SHM_COMMON, &g_victim_addr); },
+     [](Action a) { g_vseg = deferred(a); },
+     [] {
+         void* p = nullptr;
+         if (chm_shm_create("next", 64, CHM_SHM_COMMON, &p) != 0) return -1;
+         if (chm_shm_destroy("next") != 0) return -2;
+         return chm_shm_detach(p);
+     },
+     verify_vseg},
 };
 
 std::string verify_queue() {
@@ -184,6 +210,33 @@ std::string verify_sem() {
     for (; g_units; --g_units)
         if (chm_rsem_try_p(g_s) != 0) return "a unit the count showed could not be taken";
     if (chm_rsem_try_p(g_s) != -EAGAIN) return "a unit more than the count showed";
+    return "";
+}
+
+std::uint32_t refs_of(const char* name) {
+    bp::Attachment* a = bp::current();
+    bp::EntryInfo info{};
+    return bp::registry_lookup(*a, name, bp::kKindShm, &info) == 0 ? a->local_refs[info.index] : ~0u;
+}
+
+std::string verify_shm() {
+    const std::uint32_t refs = refs_of("fseg");
+    if (refs != g_refs) return "this process attached fseg " + std::to_string(refs) + " times, not " + std::to_string(g_refs);
+    void* p = nullptr;
+    if (chm_shm_attach("fseg", &p, nullptr) != 0) return "fseg cannot be attached";
+    for (++g_refs; g_refs; --g_refs)  // ours and the victim's
+        if (chm_shm_detach(p) != 0) return "an attach it counted cannot be detached";
+    return "";
+}
+
+std::string verify_vseg() {
+    void* p = nullptr;
+    const int r = chm_shm_attach("vseg", &p, nullptr);
+    if ((r == 0) != g_vseg) return std::string("vseg ") + (r == 0 ? "exists" : "does not exist");
+    if (r != 0) return "";
+    // The victim's attach (its create) and ours; then the name.
+    if (chm_shm_destroy("vseg") != 0 || chm_shm_detach(p) != 0 || chm_shm_detach(p) != 0)
+        return "vseg cannot be destroyed";
     return "";
 }
 
@@ -319,6 +372,8 @@ TEST_F(IpcFault, ATaskEndedAtAnyPointOfAQueueCallLeavesNothingBehind) {
     ASSERT_NE(make_queue("fq", CHM_MSGQ_FIFO, 8, kDepth), nullptr);
     chm_rsem_t* s = nullptr;
     ASSERT_EQ(chm_rsem_create("fs", CHM_SEM_COUNTING, 0, CHM_SHM_COMMON, &s), 0) << chm_bp_last_error();
+    void* seg = nullptr;
+    ASSERT_EQ(chm_shm_create("fseg", 256, CHM_SHM_COMMON, &seg), 0) << chm_bp_last_error();
     const std::string path = path_;
     const pid_t child = spawn([path] {
         alarm(600);

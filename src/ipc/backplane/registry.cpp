@@ -15,6 +15,7 @@
 
 #include "chimera/bp.h"
 #include "ipc/backplane/backplane.hpp"
+#include "ipc/backplane/stop_point.hpp"
 
 namespace chm::bp {
 
@@ -180,6 +181,7 @@ int registry_create_locked(const View& v, std::uint32_t me, std::uint32_t kind, 
     std::memset(v.base + off, 0, size);  // a new object starts zeroed
     RegistryEntry* e = v.entry(i);
     begin_change(e);
+    CHM_STOP_POINT("registry.create.locked");  // mid-change: allocated, the entry half written
     e->kind.store(kind, R);
     e->offset.store(off, R);
     e->size.store(size, R);
