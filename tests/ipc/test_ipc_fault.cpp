@@ -21,7 +21,9 @@
 
 #include "chimera/rsem.h"
 #include "chimera/shm.h"
+#include "chimera/rtpu.h"
 #include "ipc/backplane/stop_point.hpp"
+#include "ipc/xmail/xmail.hpp"
 #include "msgq_fixture.hpp"
 
 namespace chm::test {
@@ -82,6 +84,15 @@ std::string verify_queue();
 std::string verify_sem();
 std::string verify_shm();
 std::string verify_vseg();
+std::string verify_ring();
+void victim_ping() {
+    chm_rtpu_info_t info;
+    (void)chm_rtpu_ping(1, &info);
+}
+int next_ping() {
+    chm_rtpu_info_t info;
+    return chm_rtpu_ping(1, &info);
+}
 void* g_victim_addr;
 std::uint32_t g_refs;  // this process's attaches of "fseg"
 bool g_vseg;           // "vseg" must exist
@@ -182,6 +193,10 @@ const Case kCases[] = {
          return chm_shm_detach(p);
      },
      verify_vseg},
+    // Express mail to this RTPU (its server runs below the victim, so the
+    // victim reaches its wait): the record claimed, then in flight.
+    {"xmail.post.before_write", [] {}, victim_ping, [](Action) {}, next_ping, verify_ring},
+    {"xmail.request.wait", [] {}, victim_ping, [](Action) {}, next_ping, verify_ring},
 };
 
 std::string verify_queue() {
@@ -238,6 +253,19 @@ std::string verify_vseg() {
     if (chm_shm_destroy("vseg") != 0 || chm_shm_detach(p) != 0 || chm_shm_detach(p) != 0)
         return "vseg cannot be destroyed";
     return "";
+}
+
+std::string verify_ring() {
+    // The server (priority 5) serves what is still posted while we pause.
+    chm_task_pause_until(chm_time_now() + 2'000'000);
+    bp::Attachment* a = bp::current();
+    bp::RingHeader* ring = a->ring(1);
+    std::string held;
+    for (std::uint32_t i = 0; i < a->geo().ring_records; ++i) {
+        const std::uint32_t st = xmail::record_at(*a, ring, i)->state.load();
+        if (xmail::phase_of(st) != xmail::kFree) held += " " + std::to_string(i) + ":phase " + std::to_string(st & 0xF);
+    }
+    return held.empty() ? "" : "ring records not free:" + held;
 }
 
 // ------------------------------------------------------------ the driver
@@ -367,7 +395,9 @@ TEST_F(IpcFault, ATaskEndedAtAnyPointOfAQueueCallLeavesNothingBehind) {
     ASSERT_NE(board, MAP_FAILED);
     new (board) Board();
     g_board = board;
-    create();
+    chm_bp_config_t cfg = small_config();
+    cfg.ring_record_size = 1024;  // an express-mail server needs room for its replies
+    create(cfg);
     ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
     ASSERT_NE(make_queue("fq", CHM_MSGQ_FIFO, 8, kDepth), nullptr);
     chm_rsem_t* s = nullptr;
@@ -379,6 +409,7 @@ TEST_F(IpcFault, ATaskEndedAtAnyPointOfAQueueCallLeavesNothingBehind) {
         alarm(600);
         return run_rtpu(path, 1, [] {
             if (chm_msgq_open("fq", &g_q) || chm_rsem_open("fs", &g_s)) _exit(101);
+            if (xmail::server_start(5) != 0) _exit(102);
             spawn_task(driver, nullptr, "driver", 10, 0);
         });
     });
@@ -386,9 +417,20 @@ TEST_F(IpcFault, ATaskEndedAtAnyPointOfAQueueCallLeavesNothingBehind) {
     std::size_t rounds = 0;
     for (const Case& c : kCases)
         for (int a = 0; a < kActions; ++a) rounds += selected(c) && selected(a);
+    int status = -1;  // the child's exit status once it ended early
     for (std::size_t i = 0; i < rounds && !board->failed; ++i) {
-        ASSERT_TRUE(wait_for([&] { return board->phase.load() == 1 || board->failed.load(); }, 300000))
+        ASSERT_TRUE(wait_for(
+            [&] {
+                int st = 0;
+                if (waitpid(child, &st, WNOHANG) == child) {
+                    forget(child);
+                    status = WIFEXITED(st) ? WEXITSTATUS(st) : -WTERMSIG(st);
+                }
+                return board->phase.load() == 1 || board->failed.load() || status != -1;
+            },
+            300000))
             << "round " << i;
+        ASSERT_EQ(status, -1) << "the RTPU child ended early (status " << status << "): " << board->failure;
         if (board->failed) break;
         std::string out;
         EXPECT_EQ(bpcheck(path_, &out), 0) << "round " << i << ":\n" << out;
