@@ -528,3 +528,106 @@ TEST_F(IpcFault, AnRtpuKilledAtAnyPointOfACallLeavesNothingBehind) {
 
 }  // namespace
 }  // namespace chm::test
+
+namespace chm::test {
+namespace {
+
+// Destroy from outside, the way it happens: a task parked in a backplane
+// wait is destroyed by another task of its RTPU (a remote semaphore's P)
+// and by express mail from another process (a queue's receive). Each
+// wait is cancelled, the task ends at once, its record is withdrawn, and
+// the unit or message that comes next is not absorbed by it.
+struct Remote {
+    std::atomic<chm_tid_t> receiver{CHM_TID_NONE};
+    std::atomic<int> local_ok{0}, stop{0};
+    char failure[300];
+};
+Remote* g_remote;
+
+void parked_receiver(void*) {
+    std::uint32_t v;
+    (void)chm_msgq_receive(g_q, &v, sizeof v, nullptr);
+    std::snprintf(g_remote->failure, sizeof g_remote->failure, "the receive returned: the task was not destroyed");
+}
+void parked_p(void*) {
+    (void)chm_rsem_p(g_s);
+    std::snprintf(g_remote->failure, sizeof g_remote->failure, "P returned: the task was not destroyed");
+}
+
+void destroyer(void*) {
+    auto fail_with = [](const char* what) {
+        std::snprintf(g_remote->failure, sizeof g_remote->failure, "local destroy: %s", what);
+        chm_kernel_stop(1);
+    };
+    chm_task_attr_t at;
+    chm_task_attr_init(&at);
+    at.name = "p";
+    at.priority = 30;
+    at.joinable = 1;
+    chm_tid_t p = CHM_TID_NONE;
+    if (chm_task_spawn(&p, parked_p, nullptr, &at) != 0) fail_with("spawn");
+    for (int i = 0; i < 5000 && chm_rsem_waiting(g_s) != 1; ++i) chm_task_pause_until(chm_time_now() + 1'000'000);
+    if (chm_rsem_waiting(g_s) != 1) fail_with("P never waited");
+    if (chm_task_destroy(p) != 0) fail_with("chm_task_destroy");
+    chm_task_status_t st;
+    if (chm_task_join(p, 1'000'000'000ull, &st) != 0 || st.end_reason != CHM_TASK_DESTROYED)
+        fail_with("the task did not end within 1 s of its destroy");
+    if (chm_rsem_waiting(g_s) != 0) fail_with("its record still waits");
+    if (chm_rsem_v(g_s) != 0 || chm_rsem_try_p(g_s) != 0) fail_with("the unit after it was absorbed");
+    g_remote->local_ok = 1;
+    // Then the receiver the parent destroys by express mail.
+    at.name = "receiver";
+    chm_tid_t r = CHM_TID_NONE;
+    if (chm_task_spawn(&r, parked_receiver, nullptr, &at) != 0) fail_with("spawn");
+    g_remote->receiver = r;
+    while (!g_remote->stop) chm_task_pause_until(chm_time_now() + 1'000'000);
+    chm_kernel_stop(0);
+}
+
+TEST_F(IpcFault, ATaskParkedInACallIsDestroyedAtOnceLocallyAndByExpressMail) {
+    auto* rm = static_cast<Remote*>(
+        mmap(nullptr, sizeof(Remote), PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0));
+    ASSERT_NE(rm, MAP_FAILED);
+    new (rm) Remote();
+    g_remote = rm;
+    chm_bp_config_t cfg = small_config();
+    cfg.ring_record_size = 1024;
+    create(cfg);
+    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
+    chm_msgq_t* q = make_queue("fq", CHM_MSGQ_FIFO, 8, kDepth);
+    ASSERT_NE(q, nullptr);
+    chm_rsem_t* s = nullptr;
+    ASSERT_EQ(chm_rsem_create("fs", CHM_SEM_COUNTING, 0, CHM_SHM_COMMON, &s), 0) << chm_bp_last_error();
+    const std::string path = path_;
+    const pid_t child = spawn([path] {
+        return run_rtpu(path, 1, [] {
+            if (chm_msgq_open("fq", &g_q) || chm_rsem_open("fs", &g_s)) _exit(101);
+            if (xmail::server_start(50) != 0) _exit(102);
+            spawn_task(destroyer, nullptr, "destroyer", 10, 0);
+        });
+    });
+    ASSERT_TRUE(wait_for([&] {
+        return rm->failure[0] || (rm->receiver.load() != CHM_TID_NONE && info(q).receivers_waiting == 1);
+    })) << rm->failure;
+    ASSERT_STREQ(rm->failure, "");
+    EXPECT_EQ(rm->local_ok.load(), 1) << rm->failure;
+    const std::uint64_t t0 = now_ns();
+    ASSERT_EQ(chm_rtpu_destroy(1, rm->receiver.load()), 0) << chm_rtpu_last_error();
+    ASSERT_TRUE(wait_for([&] { return info(q).receivers_waiting == 0; }, 5000)) << "its record still waits";
+    const double us = double(now_ns() - t0) / 1e3;
+    std::printf("destroy by express mail of a task parked in a receive -> its record gone: %.0f us\n", us);
+    // The next message is not absorbed by the destroyed receiver's record.
+    const std::uint32_t v = 7;
+    ASSERT_EQ(chm_msgq_try_send(q, 0, 0, &v, sizeof v), 0);
+    std::uint32_t got = 0;
+    ASSERT_EQ(chm_msgq_try_receive(q, &got, sizeof got, nullptr), int(sizeof got));
+    EXPECT_EQ(got, v);
+    EXPECT_EQ(check_now(), "");
+    rm->stop = 1;
+    EXPECT_EQ(reap(child), 0) << rm->failure;
+    EXPECT_STREQ(rm->failure, "");
+    munmap(rm, sizeof(Remote));
+}
+
+}  // namespace
+}  // namespace chm::test
