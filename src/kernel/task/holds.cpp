@@ -8,6 +8,8 @@
 
 namespace chm::kernel {
 
+bool g_tasks_exist = false;
+
 namespace {
 
 // The task making this call, or nullptr (a host thread, the monitor
@@ -32,7 +34,7 @@ void cancel_wait_locked(Tcb* t) {
 
 }  // namespace
 
-bool hold_add(void (*release)(void*, std::uint32_t), void* obj, std::uint32_t tag) {
+bool hold_add_slow(void (*release)(void*, std::uint32_t), void* obj, std::uint32_t tag) {
     Tcb* t = caller();
     if (!t || t->nholds == Tcb::kMaxHolds) return false;
     t->holds[t->nholds] = Tcb::Hold{release, obj, tag};
@@ -43,7 +45,7 @@ bool hold_add(void (*release)(void*, std::uint32_t), void* obj, std::uint32_t ta
     return true;
 }
 
-void hold_drop(void* obj) {
+void hold_drop_slow(void* obj) {
     Tcb* t = caller();
     if (!t) return;
     for (int i = t->nholds - 1; i >= 0; --i) {
@@ -77,11 +79,11 @@ bool task_owe_end_locked(Tcb* t) {
     return true;
 }
 
-void call_enter() {
+void call_enter_slow() {
     if (Tcb* t = caller()) ++t->call_depth;
 }
 
-void call_leave() {
+void call_leave_slow() {
     Tcb* t = caller();
     if (!t || !t->call_depth || --t->call_depth) return;
     if (t->end_owed) task_end_current(CHM_TASK_DESTROYED, 0);

@@ -25,18 +25,36 @@
 
 namespace chm::kernel {
 
+// Set once a kernel was initialised in this process: before that no
+// thread is a task, and every call below is one load and a branch (a
+// host program's backplane calls pay nothing more).
+extern bool g_tasks_exist;
+
+bool hold_add_slow(void (*release)(void*, std::uint32_t), void* obj, std::uint32_t tag);
+void hold_drop_slow(void* obj);
+void call_enter_slow();
+void call_leave_slow();
+
 // Record that the calling task holds `obj` (with `tag`, e.g. the token
 // it took a lock with); release(obj, tag) gives it back if the task ends
 // before hold_drop(obj). False when not a task (nothing recorded) or the
 // list is full (Tcb::kMaxHolds; not released then).
-bool hold_add(void (*release)(void*, std::uint32_t), void* obj, std::uint32_t tag);
+inline bool hold_add(void (*release)(void*, std::uint32_t), void* obj, std::uint32_t tag) {
+    return __builtin_expect(g_tasks_exist, 1) && hold_add_slow(release, obj, tag);
+}
 // The calling task gave `obj` back (newest matching entry); no-op when
 // it is not on the list.
-void hold_drop(void* obj);
+inline void hold_drop(void* obj) {
+    if (__builtin_expect(g_tasks_exist, 1)) hold_drop_slow(obj);
+}
 
 // A backplane call begins and ends (CallScope).
-void call_enter();
-void call_leave();
+inline void call_enter() {
+    if (__builtin_expect(g_tasks_exist, 1)) call_enter_slow();
+}
+inline void call_leave() {
+    if (__builtin_expect(g_tasks_exist, 1)) call_leave_slow();
+}
 
 // True when the calling task's wait must end now: it was destroyed or its
 // cycle aborted inside the call.
