@@ -631,3 +631,78 @@ TEST_F(IpcFault, ATaskParkedInACallIsDestroyedAtOnceLocallyAndByExpressMail) {
 
 }  // namespace
 }  // namespace chm::test
+
+namespace chm::test {
+namespace {
+
+// A deadline handler's abort-cycle for a task parked in a receive: the
+// miss comes while it waits; when the message arrives the handler runs
+// at the wait, the receive completes (the message is in the task's
+// buffer, exactly once), and only then does the cycle restart. No record
+// is left and the queue is empty.
+struct Cycle {
+    std::atomic<int> entries{0}, handled{0};
+};
+Cycle* g_cycle;
+
+chm_deadline_action abort_it(const chm_deadline_info_t*, void*) {
+    ++g_cycle->handled;
+    return CHM_DL_ABORT_CYCLE;
+}
+
+void late_receiver(void*) {
+    if (g_cycle->entries.fetch_add(1) > 0) return;  // restarted: done
+    // The cycle restarts when this returns: nothing after it runs.
+    std::uint32_t v = 0;
+    (void)chm_msgq_receive(g_q, &v, sizeof v, nullptr);
+}
+
+TEST_F(IpcFault, ADeadlineHandlersAbortCycleAtAWaitLetsTheCallCompleteFirst) {
+    auto* cy = static_cast<Cycle*>(
+        mmap(nullptr, sizeof(Cycle), PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0));
+    ASSERT_NE(cy, MAP_FAILED);
+    new (cy) Cycle();
+    g_cycle = cy;
+    create();
+    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
+    chm_msgq_t* q = make_queue("fq", CHM_MSGQ_FIFO, 8, kDepth);
+    ASSERT_NE(q, nullptr);
+    const std::string path = path_;
+    const pid_t child = spawn([path] {
+        return run_rtpu(path, 1, [] {
+            if (chm_msgq_open("fq", &g_q)) _exit(101);
+            chm_task_attr_t at;
+            chm_task_attr_init(&at);
+            at.name = "late";
+            at.priority = 20;
+            at.period_ns = 200'000'000;  // the restart comes 200 ms after the first release
+            at.deadline_ns = 2'000'000;
+            at.on_deadline = abort_it;
+            chm_tid_t t = CHM_TID_NONE;
+            if (chm_task_spawn(&t, late_receiver, nullptr, &at) != 0) _exit(102);
+            spawn_task([](void*) {
+                // Stop once the restarted entry has returned.
+                for (int i = 0; i < 10000 && g_cycle->entries.load() < 2; ++i)
+                    chm_task_pause_until(chm_time_now() + 1'000'000);
+                chm_task_pause_until(chm_time_now() + 5'000'000);
+                chm_kernel_stop(0);
+            }, nullptr, "stopper", 5, 0);
+        });
+    });
+    ASSERT_TRUE(wait_for([&] { return info(q).receivers_waiting == 1; }));
+    sleep_us(20'000);  // its deadline (2 ms) passes while it waits
+    const std::uint32_t v = 42;
+    ASSERT_EQ(chm_msgq_try_send(q, 0, 0, &v, sizeof v), 0);
+    EXPECT_EQ(reap(child), 0);
+    EXPECT_EQ(cy->entries.load(), 2) << "the cycle was not restarted";
+    EXPECT_GE(cy->handled.load(), 1);
+    const chm_msgq_info_t in = info(q);
+    EXPECT_EQ(in.count, 0u) << "the message was not received";
+    EXPECT_EQ(in.received, 1u);
+    EXPECT_EQ(in.receivers_waiting, 0u);
+    EXPECT_EQ(check_now(), "");
+    munmap(cy, sizeof(Cycle));
+}
+
+}  // namespace
+}  // namespace chm::test
