@@ -400,6 +400,11 @@ void task_release_holds(Tcb* t);
 // `t` is inside a backplane call: its end is owed to the call's return
 // (true), and a wait it is in is cancelled. Mask held.
 bool task_owe_end_locked(Tcb* t);
+// A return to an error mark from inside backplane calls: the holds taken
+// since the mark (beyond `holds`) are given back, the call depth is the
+// mark's, and an end or aborted cycle owed to the calls left is carried
+// out (then it does not return). Task context, the task's own.
+void task_leave_calls_to(Tcb* t, unsigned holds, unsigned depth);
 // Another task's end hooks and local-value destructors, in the caller's
 // context (destroy, teardown); `t` is already off the CPU for good.
 void task_run_end_hooks(Tcb* t);

@@ -706,3 +706,75 @@ TEST_F(IpcFault, ADeadlineHandlersAbortCycleAtAWaitLetsTheCallCompleteFirst) {
 
 }  // namespace
 }  // namespace chm::test
+
+namespace chm::test {
+namespace {
+
+// A processor exception inside a send (at msgq.send.copy, where a bad user
+// buffer would fault) whose handler returns to an error mark set before
+// the call: the jump leaves the call's frames, so the queue lock they held
+// is given back; the same task's next send works at once and the queue
+// holds exactly that message.
+struct Marked {
+    std::atomic<int> result{-1000};
+    std::atomic<int> jumped{0};
+    std::atomic<std::uint64_t> next_ns{0};
+};
+Marked* g_marked;
+
+chm_err_action_t to_mark(const chm_err_info_t*, void*) { return CHM_ERR_TO_MARK; }
+
+void marked_sender(void*) {
+    if (chm_err_on_task(to_mark, nullptr) != 0) return;
+    static chm_err_mark_t m;  // static: read after the jump
+    if (chm_err_mark(&m) == 0) {
+        setenv("CHIMERA_FAULT_AT", "msgq.send.copy:fault", 1);
+        stop::reload();
+        const std::uint32_t one = 1;
+        (void)chm_msgq_send(g_q, 0, 0, &one, sizeof one);  // faults, returns to the mark
+        (void)chm_err_unmark(&m);
+        chm_kernel_stop(0);
+        return;
+    }
+    unsetenv("CHIMERA_FAULT_AT");
+    stop::reload();
+    g_marked->jumped = 1;
+    (void)chm_err_unmark(&m);
+    const std::uint32_t two = 2;
+    const std::uint64_t t0 = chm_time_now();
+    g_marked->result = chm_msgq_try_send(g_q, 0, 0, &two, sizeof two);
+    g_marked->next_ns = chm_time_now() - t0;
+    chm_kernel_stop(0);
+}
+
+TEST_F(IpcFault, AReturnToAnErrorMarkFromInsideACallGivesItsLockBack) {
+    auto* mk = static_cast<Marked*>(
+        mmap(nullptr, sizeof(Marked), PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0));
+    ASSERT_NE(mk, MAP_FAILED);
+    new (mk) Marked();
+    g_marked = mk;
+    create();
+    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
+    chm_msgq_t* q = make_queue("fq", CHM_MSGQ_FIFO, 8, kDepth);
+    ASSERT_NE(q, nullptr);
+    const std::string path = path_;
+    const pid_t child = spawn([path] {
+        return run_rtpu(path, 1, [] {
+            if (chm_msgq_open("fq", &g_q)) _exit(101);
+            spawn_task(marked_sender, nullptr, "marked", 20, 0);
+        });
+    });
+    EXPECT_EQ(reap(child), 0);
+    EXPECT_EQ(mk->jumped.load(), 1) << "the fault did not return to the mark";
+    EXPECT_EQ(mk->result.load(), 0) << "the task's next send after the jump";
+    std::printf("the next send after the jump: %.1f us\n", double(mk->next_ns.load()) / 1e3);
+    EXPECT_LT(mk->next_ns.load(), 500'000'000ull);  // far below the 5 s -EDEADLK
+    std::vector<std::uint32_t> got;
+    for (std::uint32_t x; chm_msgq_try_receive(q, &x, sizeof x, nullptr) == int(sizeof x);) got.push_back(x);
+    EXPECT_EQ(got, std::vector<std::uint32_t>{2});
+    EXPECT_EQ(check_now(), "");
+    munmap(mk, sizeof(Marked));
+}
+
+}  // namespace
+}  // namespace chm::test

@@ -71,6 +71,27 @@ void task_release_holds(Tcb* t) {
     }
 }
 
+void task_leave_calls_to(Tcb* t, unsigned holds, unsigned depth) {
+    for (;;) {
+        Tcb::Hold h;
+        {
+            IrqGuard guard;
+            if (t->nholds <= holds) break;
+            h = t->holds[--t->nholds];
+        }
+        h.release(h.obj, h.tag);
+    }
+    if (t->call_depth <= depth) return;
+    t->call_depth = std::uint8_t(depth);
+    t->at_cancel_point = false;
+    if (depth) return;
+    if (t->end_owed) task_end_current(CHM_TASK_DESTROYED, 0);
+    if (t->abort_cycle_owed) {
+        t->abort_cycle_owed = false;
+        abort_cycle_current();
+    }
+}
+
 bool task_owe_end_locked(Tcb* t) {
     if (!t->call_depth) return false;
     t->end_owed = true;
