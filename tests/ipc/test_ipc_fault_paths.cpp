@@ -12,6 +12,7 @@
 #include "chimera/rsem.h"
 #include "chimera/rtpu.h"
 #include "chimera/shm.h"
+#include "chimera/spin.h"
 #include "ipc/backplane/stop_point.hpp"
 #include "ipc/xmail/xmail.hpp"
 #include "msgq_fixture.hpp"
@@ -273,6 +274,82 @@ TEST_F(IpcFaultPaths, AReturnToAnErrorMarkFromInsideACallGivesItsLockBack) {
     EXPECT_EQ(got, std::vector<std::uint32_t>{2});
     EXPECT_EQ(check_now(), "");
     munmap(mk, sizeof(Marked));
+}
+
+}  // namespace
+}  // namespace chm::test
+
+namespace chm::test {
+namespace {
+
+// A user spin-lock taken by one task and unlocked by another (allowed: the
+// lock is the RTPU's) leaves a stale entry on the taker's hold list; ten
+// rounds of that, then the taker aborts holding a second spin-lock: that
+// lock is given back at once (the stale entries did not fill the list, so
+// it was recorded).
+struct Spin {
+    chm_spin_t* lock = nullptr;
+    chm_spin_t* other = nullptr;
+    std::atomic<int> phase{0}, rounds{0}, done{0};
+    std::atomic<int> next_user{-1000};
+};
+Spin* g_spin;
+
+chm_err_action_t quiet(const chm_err_info_t*, void*) { return CHM_ERR_ABORT; }
+
+void spin_taker(void*) {
+    (void)chm_err_on_task(quiet, nullptr);
+    for (int i = 0; i < 10; ++i) {
+        if (chm_spin_lock(g_spin->lock, 1000, 1'000'000'000ull) != 0) return;
+        g_spin->phase = 1;  // the other task unlocks it
+        while (g_spin->phase.load() != 2) chm_task_pause_until(chm_time_now() + 100'000);
+        g_spin->phase = 0;
+        ++g_spin->rounds;
+    }
+    if (chm_spin_lock(g_spin->other, 1000, 1'000'000'000ull) != 0) return;
+    (void)chm_err_invoke(CHM_ERR_KERNEL, EFAULT);  // aborts, the second lock held
+}
+
+void spin_unlocker(void*) {
+    for (int i = 0; i < 10; ++i) {
+        while (g_spin->phase.load() != 1) chm_task_pause_until(chm_time_now() + 100'000);
+        (void)chm_spin_unlock(g_spin->lock);
+        g_spin->phase = 2;
+    }
+    chm_task_pause_until(chm_time_now() + 5'000'000);  // the taker aborts meanwhile
+    g_spin->next_user = chm_spin_try_lock(g_spin->other);
+    if (g_spin->next_user == 0) (void)chm_spin_unlock(g_spin->other);
+    chm_kernel_stop(0);
+}
+
+TEST_F(IpcFaultPaths, AUserSpinLockUnlockedByAnotherTaskLeavesNoStaleHold) {
+    auto* sp = static_cast<Spin*>(
+        mmap(nullptr, sizeof(Spin), PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0));
+    ASSERT_NE(sp, MAP_FAILED);
+    new (sp) Spin();
+    g_spin = sp;
+    create();
+    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
+    void* mem = nullptr;
+    ASSERT_EQ(chm_shm_create("spin", 2 * sizeof(chm_spin_t), CHM_SHM_COMMON, &mem), 0) << chm_bp_last_error();
+    ASSERT_EQ(chm_spin_init(static_cast<chm_spin_t*>(mem)), 0);
+    ASSERT_EQ(chm_spin_init(static_cast<chm_spin_t*>(mem) + 1), 0);
+    const std::string path = path_;
+    const pid_t child = spawn([path] {
+        return run_rtpu(path, 1, [] {
+            void* m = nullptr;
+            if (chm_shm_attach("spin", &m, nullptr)) _exit(101);
+            g_spin->lock = static_cast<chm_spin_t*>(m);
+            g_spin->other = g_spin->lock + 1;
+            spawn_task(spin_taker, nullptr, "taker", 20, 0);
+            spawn_task(spin_unlocker, nullptr, "unlocker", 10, 0);
+        });
+    });
+    EXPECT_EQ(reap(child), 0);
+    EXPECT_EQ(sp->rounds.load(), 10);
+    EXPECT_EQ(sp->next_user.load(), 0) << "the aborted task's second spin-lock was not given back";
+    EXPECT_EQ(check_now(), "");
+    munmap(sp, sizeof(Spin));
 }
 
 }  // namespace

@@ -36,7 +36,13 @@ void cancel_wait_locked(Tcb* t) {
 
 bool hold_add_slow(void (*release)(void*, std::uint32_t), void* obj, std::uint32_t tag) {
     Tcb* t = caller();
-    if (!t || t->nholds == Tcb::kMaxHolds) return false;
+    if (!t) return false;
+    // An entry for the same object is stale (a lock is never held twice:
+    // this one was given back where the task could not drop it, e.g. a
+    // user spin-lock unlocked by another task): it goes, so such entries
+    // never fill the list, and the new one is pushed as the newest.
+    hold_drop_slow(obj);
+    if (t->nholds == Tcb::kMaxHolds) return false;
     t->holds[t->nholds] = Tcb::Hold{release, obj, tag};
     // The entry is whole before the count shows it to a destroyer that
     // runs when this task is preempted (same thread).
