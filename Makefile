@@ -98,11 +98,14 @@ test-tsan: deps $(BUILD_TSAN)/build.ninja
 	TSAN_OPTIONS=halt_on_error=1 $(MESON_TEST) -C $(BUILD_TSAN) --no-rebuild \
 	    $(foreach s,$(TSAN_SUITES),--suite $(s))
 
-# The kill-at-a-named-point tests with 2000 kills per point, not 100, and
-# the differential scheduler test with 20,000 sets per policy, random seed.
+# The kill-at-a-named-point tests with 2000 kills per point, not 100, the
+# fault injection inside every backplane call with 2000 runs per point and
+# action (ipc_fault), and the differential scheduler test with 20,000 sets
+# per policy, random seed.
 stress: deps $(BUILD)/build.ninja
 	meson compile -C $(BUILD)
-	CHM_KILL_REPEATS=2000 $(MESON_TEST) -C $(BUILD) --timeout-multiplier 30 ipc_recovery ipc_msgq_robust
+	CHM_KILL_REPEATS=2000 CHM_FAULT_REPEATS=2000 $(MESON_TEST) -C $(BUILD) --timeout-multiplier 30 \
+	    ipc_recovery ipc_msgq_robust ipc_fault
 	CHM_DIFF_SEED=0 CHM_DIFF_SETS=20000 $(BUILD)/tests/kernel/test_kernel_sched_diff --gtest_filter='Policies/*'
 
 test-native: deps deps-bench $(BUILD)/build.ninja

@@ -88,7 +88,11 @@ void chm_task_end(int status);
 /* Destroy a task (itself included: then like chm_task_exit). It is taken
  * off the CPU first, then its end hooks run in the caller's context, then
  * its stack is freed; semaphores it holds are NOT released (see chm_sem
- * docs). Errors: -ESRCH unknown task. */
+ * docs). A task inside a backplane call (queue, remote semaphore, shared
+ * memory, express mail) is not ended there: its wait is cancelled and it
+ * ends when the call returns, so 0 may come back before it has ended
+ * (chm_task_join waits for that); whatever backplane locks and records a
+ * task holds are given back however it ends. Errors: -ESRCH unknown task. */
 CHM_CHECK int chm_task_destroy(chm_tid_t task);
 
 /* How a task ended (chm_task_status_t.end_reason). */

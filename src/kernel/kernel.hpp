@@ -85,6 +85,24 @@ struct Tcb {
     struct ErrTask* err = nullptr;
     void* held = nullptr;
 
+    // Inside backplane calls (task/holds.cpp, issue 15): how deep; what
+    // the task holds there (a lock, a waiter record), each given back by
+    // its release function however the task ends; and an end (destroy) or
+    // an aborted cycle owed for when the outermost call returns or reaches
+    // its wait (a cancellation point).
+    struct Hold {
+        void (*release)(void*, std::uint32_t);
+        void* obj;
+        std::uint32_t tag;
+    };
+    static constexpr int kMaxHolds = 6;
+    Hold holds[kMaxHolds] = {};
+    std::uint8_t nholds = 0;
+    std::uint8_t call_depth = 0;
+    bool at_cancel_point = false;  // in a call's wait: handlers may run, cancels take effect
+    bool end_owed = false;         // destroyed inside a call
+    bool abort_cycle_owed = false; // a deadline handler aborted the cycle inside a call
+
     // User signals.
     std::uint32_t sig_pending = 0;
     std::uint32_t sig_blocked = 0;
@@ -330,10 +348,14 @@ int block_current_locked();
 // Work owed to the current task in its own context: user signals, deadline
 // handler, aborted cycle. Called with the mask held; releases it around
 // user code.
+// Inside a backplane call (call_depth) only at its wait (at_cancel_point):
+// a handler run while the call holds an object's lock could end the task
+// there, or call into the same object and wait for itself.
 void deliver_pending_slow_locked();
 inline void deliver_pending_locked() {
     const Tcb* cur = g_k.current;
-    if (cur && (cur->miss_pending || (cur->sig_pending & ~cur->sig_blocked)))
+    if (cur && (cur->miss_pending || (cur->sig_pending & ~cur->sig_blocked)) &&
+        (!cur->call_depth || cur->at_cancel_point))
         deliver_pending_slow_locked();
 }
 void charge_current_locked(std::uint64_t now);
@@ -390,6 +412,17 @@ void task_end_locked(Tcb* t);         // unlink everywhere, mark ended
 // End the running task with `reason` and `status`: its hooks first (task
 // context, mask free), then the end proper. Does not return.
 [[noreturn]] void task_end_current(chm_task_end_reason reason, int status);
+// Give back everything `t` holds in backplane calls (its hold list, last
+// first), in the caller's context, mask free: the end of every task.
+void task_release_holds(Tcb* t);
+// `t` is inside a backplane call: its end is owed to the call's return
+// (true), and a wait it is in is cancelled. Mask held.
+bool task_owe_end_locked(Tcb* t);
+// A return to an error mark from inside backplane calls: the holds taken
+// since the mark (beyond `holds`) are given back, the call depth is the
+// mark's, and an end or aborted cycle owed to the calls left is carried
+// out (then it does not return). Task context, the task's own.
+void task_leave_calls_to(Tcb* t, unsigned holds, unsigned depth);
 // Another task's end hooks and local-value destructors, in the caller's
 // context (destroy, teardown); `t` is already off the CPU for good.
 void task_run_end_hooks(Tcb* t);

@@ -284,6 +284,10 @@ int lock_holder(const Lock* l, char* out, std::size_t n);
 // waited for itself until the timeout and left the dead slot's waiters.
 int lock_acquire_recovery(const View& v, Lock* l, std::uint32_t rt);
 void lock_release(Lock* l);
+// The token of a lock whose holder task ended inside a call with it dirty
+// (lock.cpp, release_abandoned): its slot field names no slot, so every
+// waiter finds it dead and robs it at once.
+inline constexpr std::uint32_t kOrphanToken = 0xFF000000u;
 // Set before changing the structure a lock guards, clear after.
 void lock_mark_dirty(Lock* l);
 void lock_clear_dirty(Lock* l);

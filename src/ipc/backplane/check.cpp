@@ -156,7 +156,10 @@ void check_lock(const View& v, const Lock& l, const char* what, Report& r) {
         if (l.dirty.load(R)) r.problem("%s.dirty is set on a free lock", what);
         return;
     }
-    if (!token_alive(v, t, true))
+    if (t == kOrphanToken)
+        r.problem("%s: left mid-change by a task that ended inside a call (task 0x%08x; its next user repairs it)",
+                  what, l.owner_task.load(R));
+    else if (!token_alive(v, t, true))
         r.problem("%s: held by a dead owner (token 0x%08x: slot %u generation %u%s)", what, t, token_slot(t),
                   token_gen(t), token_recovery(t) ? ", recovery" : "");
 }

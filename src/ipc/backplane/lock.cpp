@@ -17,6 +17,7 @@
 #include <unistd.h>
 
 #include "ipc/backplane/backplane.hpp"
+#include "kernel/task/holds.hpp"
 #include "port.hpp"
 
 namespace chm::bp {
@@ -71,11 +72,32 @@ bool token_alive(const View& v, std::uint32_t token, bool deep) {
     return deep ? !slot_holder_dead(v, slot, st) : true;
 }
 
+// Task `task` ended holding `l` (its hold list, kernel/task/holds.hpp):
+// a lock it left clean is released; one it left dirty (mid-change) gets
+// the orphan token, which no slot can own, so the next user robs it at
+// once (-EOWNERDEAD with the dirty flag) and repairs the object exactly
+// as for a dead process. Nothing is done unless the lock still names the
+// task (another task of the RTPU may have unlocked a user spin-lock and
+// taken it again). Any context, no waiting.
+static void release_abandoned(void* p, std::uint32_t task) {
+    Lock* l = static_cast<Lock*>(p);
+    std::uint32_t t = l->token.load(std::memory_order_acquire);
+    if (t == 0 || t == kOrphanToken || l->owner_task.load(std::memory_order_relaxed) != task) return;
+    if (l->dirty.load(std::memory_order_acquire)) {
+        (void)l->token.compare_exchange_strong(t, kOrphanToken, std::memory_order_release);
+        return;
+    }
+    l->owner_task.store(0, std::memory_order_relaxed);
+    (void)l->token.compare_exchange_strong(t, 0, std::memory_order_release);
+}
+
 static int take(Lock* l, std::uint32_t expected, std::uint32_t me) {
     if (!l->token.compare_exchange_strong(expected, me, std::memory_order_acquire,
                                           std::memory_order_relaxed))
         return -EBUSY;
-    l->owner_task.store(task_word(), std::memory_order_relaxed);
+    const std::uint32_t task = task_word();
+    l->owner_task.store(task, std::memory_order_relaxed);
+    (void)kernel::hold_add(release_abandoned, l, task);  // a task's: given back however it ends
     return 0;
 }
 
@@ -188,6 +210,7 @@ int lock_acquire_recovery(const View& v, Lock* l, std::uint32_t rt) {
 }
 
 void lock_release(Lock* l) {
+    kernel::hold_drop(l);
     l->owner_task.store(0, std::memory_order_relaxed);
     l->token.store(0, std::memory_order_release);
 }

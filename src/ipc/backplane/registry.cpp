@@ -182,6 +182,7 @@ int registry_create_locked(const View& v, std::uint32_t me, std::uint32_t kind, 
     std::memset(v.base + off, 0, size);  // a new object starts zeroed
     RegistryEntry* e = v.entry(i);
     begin_change(e);
+    CHM_STOP_POINT("registry.create.locked");  // mid-change: allocated, the entry half written
     e->kind.store(kind, R);
     e->offset.store(off, R);
     e->size.store(size, R);

@@ -3,8 +3,15 @@
 #include "ipc/backplane/stop_point.hpp"
 
 #include <csignal>
+#include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
+
+#include "chimera/err.h"
+#include "chimera/task.h"
+#include "kernel/task/holds.hpp"
+#include "port.hpp"
 
 namespace chm::stop {
 
@@ -12,18 +19,57 @@ std::atomic<int> g_state{0};
 
 namespace {
 
-char g_name[128];               // the armed point's name (written before g_state says 2)
-std::atomic<bool> g_fired{false};  // stops once per process: a retry loop passes the point again
+enum class Action { Stop, Kill, Abort, Fault, Destroy, AbortCycle };
+
+struct Named {
+    const char* name;
+    Action action;
+};
+constexpr Named kActions[] = {{"stop", Action::Stop},       {"kill", Action::Kill},
+                              {"abort", Action::Abort},     {"fault", Action::Fault},
+                              {"destroy", Action::Destroy}, {"abort_cycle", Action::AbortCycle}};
+
+char g_name[128];                  // the armed point's name (written before g_state says 2)
+Action g_action = Action::Stop;
+std::atomic<bool> g_fired{false};  // acts once per process: a retry loop passes the point again
+
+void off() { g_state.store(1, std::memory_order_relaxed); }
 
 void read_env() {
-    const char* e = std::getenv("CHIMERA_STOP_AT");
+    const char* f = std::getenv("CHIMERA_FAULT_AT");
+    const char* e = f && *f ? f : std::getenv("CHIMERA_STOP_AT");
     // A name longer than the buffer cannot be one of ours: off.
-    if (!e || !*e || std::strlen(e) >= sizeof g_name) {
-        g_state.store(1, std::memory_order_relaxed);
-        return;
-    }
+    if (!e || !*e || std::strlen(e) >= sizeof g_name) return off();
     std::strcpy(g_name, e);
+    g_action = Action::Stop;
+    if (e == f) {
+        char* colon = std::strrchr(g_name, ':');
+        bool known = false;
+        if (colon)
+            for (const Named& a : kActions)
+                if (std::strcmp(colon + 1, a.name) == 0) {
+                    g_action = a.action;
+                    known = true;
+                }
+        if (!known) {
+            std::fprintf(stderr,
+                         "chimera: CHIMERA_FAULT_AT=%s: expected <point>:<action>, the action one of "
+                         "stop, kill, abort, fault, destroy, abort_cycle; no fault injected\n", e);
+            return off();
+        }
+        *colon = '\0';
+    }
     g_state.store(2, std::memory_order_release);
+}
+
+bool in_task() { return port::on_kernel_thread() && chm_task_self() != CHM_TID_NONE; }
+
+// A processor exception in the task (a store to an unmapped address, read
+// from a volatile so the compiler cannot see it), as a bad user buffer in
+// the call would raise; the kernel's fault handler takes it.
+volatile std::uintptr_t g_bad_address = 16;
+__attribute__((no_sanitize("address", "undefined"), noinline)) void fault_now() {
+    *reinterpret_cast<volatile int*>(g_bad_address) = 1;
 }
 
 }  // namespace
@@ -39,8 +85,19 @@ void hit(const char* name) {
         s = g_state.load(std::memory_order_acquire);
     }
     if (s != 2 || std::strcmp(name, g_name) != 0) return;
+    // The task actions wait for a task to pass the point (a host thread
+    // of the same process passes it untouched).
+    const bool task_action = g_action != Action::Stop && g_action != Action::Kill;
+    if (task_action && !in_task()) return;
     if (g_fired.exchange(true)) return;
-    ::raise(SIGSTOP);  // every thread of the process stops; SIGCONT goes on from here
+    switch (g_action) {
+    case Action::Stop: ::raise(SIGSTOP); break;  // every thread stops; SIGCONT goes on from here
+    case Action::Kill: ::raise(SIGKILL); break;
+    case Action::Abort: (void)chm_err_invoke(CHM_ERR_KERNEL, EFAULT); break;  // the default handler aborts
+    case Action::Fault: fault_now(); break;
+    case Action::Destroy: (void)chm_task_destroy(chm_task_self()); break;
+    case Action::AbortCycle: kernel::abort_cycle_current(); break;
+    }
 }
 
 void reload() {

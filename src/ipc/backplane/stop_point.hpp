@@ -5,12 +5,20 @@
 // point, so a test can hold it at exactly that instant, act on the
 // backplane from other processes, then SIGCONT it (tests/ipc/test_ipc_races.cpp).
 //
-// Off (the variable unset, the normal case) a point costs one load of a
-// cached flag and one branch predicted not taken. The variable is read
+// The same points inject faults: CHIMERA_FAULT_AT=<name>:<action> does,
+// the first time a task (or for kill, any thread) passes <name>: `abort`
+// (an error signal, which the default handler answers by aborting the
+// task), `fault` (a processor exception: a store to address 0), `destroy`
+// (chm_task_destroy of the task itself), `abort_cycle` (as a deadline
+// handler's CHM_DL_ABORT_CYCLE), `kill` (SIGKILL, the process) or `stop`
+// (as CHIMERA_STOP_AT). An unknown action is reported on stderr and
+// nothing is injected. tests/ipc/test_ipc_fault.cpp runs every point with
+// every action.
+//
+// Off (the variables unset, the normal case) a point costs one load of a
+// cached flag and one branch predicted not taken. The variables are read
 // once, at the first point a process passes. Names are "<area>.<function>.
-// <instant>"; the same names will serve fault injection at named points
-// (CHIMERA_FAULT_AT=<name>:<action>, not built yet), which is why the slow
-// path takes the name and not a number.
+// <instant>".
 #pragma once
 
 #include <atomic>
@@ -24,9 +32,10 @@ extern std::atomic<int> g_state;
 // when `name` is the armed point (once per process).
 void hit(const char* name);
 
-// Forget what was read, so the next point reads the environment again:
-// for a forked child that set CHIMERA_STOP_AT after its parent had
-// already passed a point (tests).
+// Forget what was read and re-arm, so the next point reads the
+// environment again: for a forked child that set CHIMERA_STOP_AT after
+// its parent had already passed a point, or a test that injects the same
+// fault again.
 void reload();
 
 }  // namespace chm::stop

@@ -15,6 +15,7 @@
 #include "ipc/msgq/msgq.hpp"
 #include "ipc/wake/wake.hpp"
 #include "kernel/sync/remote_wait.hpp"
+#include "kernel/task/holds.hpp"
 
 namespace chm::ipc::msgq {
 
@@ -67,6 +68,10 @@ int put_locked(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t se
     s->prio.store(prio, R);
     s->seq.store(bump(q->next_seq, 1), R);
     s->sender.store(sender, R);
+    // A fault in this copy (a bad user buffer) ends the task here, the
+    // slot off the free list and the lock dirty: the task's hold list
+    // orphans the lock and its next user rebuilds the lists.
+    CHM_STOP_POINT("msgq.send.copy");
     if (len) std::memcpy(payload_of(s), data, len);
     s->state.store(kSlotQueued, std::memory_order_release);  // committed
     if (g.order == kLifo) {
@@ -126,6 +131,7 @@ int get_locked(const bp::View& v, QueueHeader* q, const Geo& g, void* buf, std::
         q->tail[l].store(kNil, R);
         clear_bits(q->level_mask, 1u << l);
     }
+    CHM_STOP_POINT("msgq.receive.copy");
     if (len) std::memcpy(buf, payload_of(s), len);
     s->state.store(kSlotFree, std::memory_order_release);  // released
     s->next.store(q->free_head.load(R), R);
@@ -186,10 +192,54 @@ int bad_handle(const char* fn, chm_msgq_t* h) {
     return -EINVAL;
 }
 
+// The open queue whose waiter records hold `w`, or nullptr.
+QueueHeader* queue_of_record(const bp::Attachment* a, const void* w, const Geo** g) {
+    const std::uint32_t n = a->geo().registry_capacity;
+    for (std::uint32_t e = 0; e < n; ++e) {
+        const bp::Attachment::OpenObject& o = a->objects[e];
+        if (o.kind != bp::kKindMsgQueue) continue;
+        const Geo* og = reinterpret_cast<const Geo*>(o.words);
+        auto* q = reinterpret_cast<QueueHeader*>(a->base + o.offset);
+        const char* lo = reinterpret_cast<const char*>(waiter_at(q, *og, 0));
+        const char* p = static_cast<const char*>(w);
+        if (p >= lo && p < lo + std::size_t(og->max_waiters) * sizeof(Waiter) &&
+            (p - lo) % sizeof(Waiter) == 0) {
+            *g = og;
+            return q;
+        }
+    }
+    return nullptr;
+}
+
+// A task ended waiting (an abort or an exception in a handler run at the
+// wait; kernel/task/holds.hpp): its record `w` of `ticket` is withdrawn
+// as a timed-out waiter's would be, and a grant it held passes to the
+// next live waiter of its direction.
+void withdraw_abandoned(void* w, std::uint32_t ticket) {
+    const bp::Attachment* a = bp::current();
+    const Geo* g;
+    QueueHeader* q = a ? queue_of_record(a, w, &g) : nullptr;
+    if (!q || lock_queue(*a, q, *g, a->token) != 0) return;
+    auto* r = static_cast<Waiter*>(w);
+    WakeBuf<2> wakes;
+    const std::uint32_t st = r->state.load(R);
+    if (st != kWaiterFree && r->ticket.load(R) == ticket && r->token.load(R) == a->token) {
+        const bool granted = r->word.load(R) == ticket;
+        bp::lock_mark_dirty(&q->lock);
+        free_record_locked(q, r);
+        if (granted && (st == kWaiterRecv ? q->count.load(R) != 0 : q->free_head.load(R) != kNil))
+            grant_one_locked(*a, q, *g, st, &wakes);
+        bp::lock_clear_dirty(&q->lock);
+    }
+    unlock_queue(q);
+    wakes.deliver();
+}
+
 // The two directions of the queue, so send and receive share one wait
 // loop (a template: the hot path is inlined, no indirect calls).
 struct SendOp {
     static constexpr std::uint32_t kMine = kWaiterSend, kOther = kWaiterRecv;
+    static void wait_point() { CHM_STOP_POINT("msgq.send.wait"); }
     std::uint32_t sender, type, prio, len;
     const void* data;
     bool ready(const QueueHeader* q, const Geo& g) const { return has_room(q, g, len); }
@@ -200,6 +250,7 @@ struct SendOp {
 
 struct RecvOp {
     static constexpr std::uint32_t kMine = kWaiterRecv, kOther = kWaiterSend;
+    static void wait_point() { CHM_STOP_POINT("msgq.receive.wait"); }
     void* buf;
     std::size_t size;
     chm_msgq_msg_info_t* info;
@@ -207,9 +258,11 @@ struct RecvOp {
     int act(const bp::View& v, QueueHeader* q, const Geo& g) const { return get_locked(v, q, g, buf, size, info); }
 };
 
-// The whole operation, lock to unlock.
+// The whole operation, lock to unlock. A task destroyed or whose cycle is
+// aborted meanwhile ends when it returns (kernel/task/holds.hpp).
 template <class Op>
 int run(const bp::Attachment* a, QueueHeader* q, const Geo& g, const Op& op, WaitLimit limit) {
+    kernel::CallScope in_call;
     int r = lock_queue(*a, q, g, a->token, &limit);
     if (r) return r;
     CHM_STOP_POINT("msgq.run.locked");
@@ -265,7 +318,10 @@ int run(const bp::Attachment* a, QueueHeader* q, const Geo& g, const Op& op, Wai
         unlock_queue(q);
         int wr;
         if (w) {
+            (void)kernel::hold_add(withdraw_abandoned, w, ticket);  // however the task ends while it waits
+            Op::wait_point();
             wr = wait_word(word_of(w->word), deadline);
+            kernel::hold_drop(w);
         } else {  // every record taken: poll
             bp::relinquish(left < 1000000 ? left : 1000000);
             wr = 0;

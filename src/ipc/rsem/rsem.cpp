@@ -19,6 +19,7 @@
 #include "ipc/wake/wake.hpp"
 #include "ipc/err/report.hpp"
 #include "kernel/sync/remote_wait.hpp"
+#include "kernel/task/holds.hpp"
 
 using namespace chm::bp;
 
@@ -194,14 +195,25 @@ std::uint32_t owner_slot(const Waiter* w) { return token_slot(w->owner.load()); 
 
 WaiterId recorded(const Waiter* w) { return WaiterId{w->task.load(), w->urgency.load()}; }
 
-// The most urgent waiting record, or nullptr. Lock held.
+// The most urgent waiting record, or nullptr. Lock held. A record whose
+// process died or left (its token no longer live) is dropped on the way,
+// as message queues do: its recovery has not run yet, and a unit granted
+// to it would be lost with it.
 Waiter* most_urgent_locked(Rsem* s) {
     Waiter* best = nullptr;
+    const Attachment* a = current();
     std::uint32_t left = s->nwaiting.load();  // stop after the last waiting record
     for (Waiter& w : s->w) {
         if (!left) break;
         if (w.state.load() != kWaiting) continue;
         --left;
+        if (a && !token_alive(*a, w.owner.load(), false)) {
+            lock_mark_dirty(&s->lock);
+            w.state.store(kFree);
+            s->nwaiting.store(s->nwaiting.load() - 1);
+            lock_clear_dirty(&s->lock);
+            continue;
+        }
         if (!best || w.prio.load() > best->prio.load() ||
             (w.prio.load() == best->prio.load() && int32_t(w.seq.load() - best->seq.load()) < 0))
             best = &w;
@@ -233,6 +245,34 @@ int give_locked(Rsem* s, Waiter** woken) {
     if (s->count.load() == UINT32_MAX) return -EOVERFLOW;
     s->count.store(s->count.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);  // lock held: no RMW
     return 0;
+}
+
+// A task ended waiting in P (an abort or an exception in a handler run at
+// the wait; kernel/task/holds.hpp) with record `p`, number `index` of its
+// semaphore: withdrawn as a timed-out waiter's would be, and a unit
+// granted to it and never taken goes to the next waiter or the count.
+void withdraw_abandoned(void* p, std::uint32_t index) {
+    Waiter* me = static_cast<Waiter*>(p);
+    Rsem* s = reinterpret_cast<Rsem*>(reinterpret_cast<char*>(me - index) - offsetof(Rsem, w));
+    const Attachment* a = current();
+    if (!a || index >= CHM_RSEM_WAITERS || lock(s) != 0) return;
+    Waiter* woken = nullptr;
+    if (me->owner.load() == a->token) {
+        const std::uint32_t st = me->state.load();
+        lock_mark_dirty(&s->lock);
+        if (st == kWaiting) s->nwaiting.store(s->nwaiting.load() - 1);
+        me->state.store(kFree);
+        lock_clear_dirty(&s->lock);
+        if (st == kGranted) (void)give_locked(s, &woken);  // (marks the lock dirty itself)
+    }
+    std::uint32_t slot = 0;
+    WaiterId who;
+    if (woken) {
+        slot = owner_slot(woken);
+        who = recorded(woken);
+    }
+    unlock(s);
+    if (woken) wake_granted(grant_of(s, woken), slot, who);
 }
 
 }  // namespace
@@ -414,6 +454,7 @@ static int rsem_p_impl(chm_rsem_t* h, WaitLimit limit) {
     Rsem* s = from_handle(h);
     if (!s) return set_error("chm_rsem_p: not a remote semaphore handle"), -EINVAL;
     Attachment* a = current();
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     std::uint64_t budget;
     const LockWait how = p_wait(limit, &budget);
     if (int r = lock(s, how, budget)) return r;
@@ -455,6 +496,7 @@ static int rsem_p_impl(chm_rsem_t* h, WaitLimit limit) {
     const std::uint32_t seq = s->seq.load(R) + 1;
     s->seq.store(seq, R);
     s->nwaiting.store(s->nwaiting.load(R) + 1, R);
+    CHM_STOP_POINT("rsem.p.locked");  // mid-change: nwaiting counts a record not yet waiting
     std::uint32_t* const grant = grant_of(s, me);
     __atomic_store_n(grant, initial, __ATOMIC_RELAXED);
     me->owner.store(a->token, R);
@@ -466,7 +508,10 @@ static int rsem_p_impl(chm_rsem_t* h, WaitLimit limit) {
     lock_clear_dirty(&s->lock);
     unlock(s);
 
+    (void)chm::kernel::hold_add(withdraw_abandoned, me, std::uint32_t(me - s->w));  // however the task ends
+    CHM_STOP_POINT("rsem.p.wait");
     int r = wait_word(grant, deadline);
+    chm::kernel::hold_drop(me);
 
     // Granted: the granter already took the record off the waiting list
     // (kGranted, nwaiting), so giving it back needs no lock: a hand-off
@@ -489,6 +534,7 @@ static int rsem_p_impl(chm_rsem_t* h, WaitLimit limit) {
 static int rsem_v_impl(chm_rsem_t* h) {
     Rsem* s = from_handle(h);
     if (!s) return set_error("chm_rsem_v: not a remote semaphore handle"), -EINVAL;
+    chm::kernel::CallScope in_call;
     if (int r = lock(s, LockWait::kRelease)) return r;
     CHM_STOP_POINT("rsem.v.locked");
     Waiter* w = nullptr;

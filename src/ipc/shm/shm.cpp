@@ -10,7 +10,9 @@
 #include "chimera/bp.h"
 #include "chimera/shm.h"
 #include "ipc/backplane/backplane.hpp"
+#include "ipc/backplane/stop_point.hpp"
 #include "ipc/err/report.hpp"
+#include "kernel/task/holds.hpp"
 
 using namespace chm::bp;
 
@@ -27,6 +29,7 @@ static int shm_create_impl(const char* name, size_t size, int where, void** out)
         set_error("chm_shm_create %s: where %d is neither CHM_SHM_COMMON nor an RTPU 0..%u", name, where, a->slots() - 1);
         return -ECHRNG;
     }
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     int r = lock_registry(a);
     if (r) return r;
     EntryInfo info{};
@@ -56,9 +59,11 @@ static int shm_attach_impl(const char* name, void** out, size_t* size) {
     if (!name || !out) return set_error("chm_shm_attach: NULL name or out"), -EINVAL;
     Attachment* a = need_attachment();
     if (!a) return -ENOTCONN;
+    chm::kernel::CallScope in_call;
     int r = lock_registry(a);
     if (r) return r;
     const int i = registry_find_locked(*a, name, kKindShm);
+    CHM_STOP_POINT("shm.attach.locked");
     char why[200];
     if (i >= 0) {
         // The segment is handed out as plain memory: its offset and size

@@ -11,6 +11,7 @@
 #include "ipc/backplane/stop_point.hpp"
 #include "ipc/wake/wake.hpp"
 #include "ipc/xmail/xmail.hpp"
+#include "kernel/task/holds.hpp"
 #include "kernel/err/last.hpp"
 #include "kernel.hpp"
 #include "port.hpp"
@@ -154,6 +155,24 @@ unsigned withdraw(const bp::View& v, std::uint32_t token) {
     return n;
 }
 
+namespace {
+
+// A request given up: not yet served -> FREE, being served -> ABANDONED
+// (its server frees it), a reply nobody will read -> FREE.
+void give_up(Record* r, std::uint32_t seq) {
+    if (abandon(r, seq)) {
+        std::uint32_t replied = make_state(seq, kReplied);
+        r->state.compare_exchange_strong(replied, make_state(seq, kFree), Rel, R);
+    }
+}
+
+// A task ended with request `p` of `seq` claimed or in flight (an abort or
+// an exception; kernel/task/holds.hpp): its record is given up at once,
+// not kept by the live process until the process leaves.
+void give_up_abandoned(void* p, std::uint32_t seq) { give_up(static_cast<Record*>(p), seq); }
+
+}  // namespace
+
 int post(int rtpu, Kind kind, const void* req, std::uint32_t len, std::uint64_t timeout_ns, Pending* p) {
     t_error[0] = 0;
     p->r = nullptr;
@@ -214,6 +233,8 @@ int post(int rtpu, Kind kind, const void* req, std::uint32_t len, std::uint64_t 
 
     // 2. Write and post. The record stays ours while we write: a reclaim
     // can only set it STALE (xmail.hpp), never hand it to another sender.
+    // The calling task holds it until await or cancel gives it back.
+    (void)kernel::hold_add(give_up_abandoned, r, seq);
     CHM_STOP_POINT("xmail.post.before_write");
     r->kind = kind;
     r->status = 0;
@@ -226,6 +247,7 @@ int post(int rtpu, Kind kind, const void* req, std::uint32_t len, std::uint64_t 
     if (len) std::memcpy(payload_of(r), req, len);
     std::uint32_t expect = make_state(seq, kWriting);
     if (!r->state.compare_exchange_strong(expect, make_state(seq, kPosted), Rel, R)) {
+        kernel::hold_drop(r);
         (void)abandon(r, seq);  // STALE: ours to free
         return set_error("RTPU %d: request set aside as stale (the sender stalled over %u ms while "
                          "writing it); not sent", rtpu, kStaleWriteMs), -ETIMEDOUT;
@@ -233,6 +255,7 @@ int post(int rtpu, Kind kind, const void* req, std::uint32_t len, std::uint64_t 
     if (ipc::wake_ring(std::uint32_t(rtpu), ipc::kVecExpressMail) == -EPERM) {
         // The slot's pid or thread id is not its member's (reported, last
         // error set): nobody we may wake would serve it.
+        kernel::hold_drop(r);
         if (abandon(r, seq)) {
             std::uint32_t replied = make_state(seq, kReplied);  // nobody will read it
             r->state.compare_exchange_strong(replied, make_state(seq, kFree), Rel, R);
@@ -249,6 +272,12 @@ int await(Pending* p, void* reply, std::uint32_t cap, std::uint32_t* reply_len) 
     Record* r = p->r;
     if (!r) return set_error("no request posted"), -EINVAL;
     p->r = nullptr;
+    // Given back on every return below (taken, abandoned or left to the
+    // server as ABANDONED).
+    struct Drop {
+        Record* r;
+        ~Drop() { kernel::hold_drop(r); }
+    } drop{r};
     const std::uint32_t seq = p->seq, st = p->status;
     const int rtpu = int(p->rtpu);
     const std::uint64_t deadline = p->deadline, timeout_ns = p->timeout_ns;
@@ -277,7 +306,13 @@ int await(Pending* p, void* reply, std::uint32_t cap, std::uint32_t* reply_len) 
         }
         std::uint64_t slice = deadline - now;
         if (slice > std::uint64_t(kSliceNs)) slice = std::uint64_t(kSliceNs);
+        CHM_STOP_POINT("xmail.request.wait");
         ipc::wait_word(word, ipc::wait_for(slice).deadline());  // -EINTR (a user signal): keep waiting, bounded
+        if (kernel::cancel_owed()) {  // destroyed or its cycle aborted meanwhile: give the request up
+            if (abandon(r, seq)) return take_reply(r, seq, reply, cap, reply_len);
+            set_error("RTPU %d: request given up: the task is ending", rtpu);
+            return -EINTR;
+        }
     }
 }
 
@@ -286,15 +321,14 @@ void cancel(Pending* p) {
     Record* r = p->r;
     if (!r) return;
     p->r = nullptr;
-    if (abandon(r, p->seq)) {  // the reply came: nobody will read it
-        std::uint32_t replied = make_state(p->seq, kReplied);
-        r->state.compare_exchange_strong(replied, make_state(p->seq, kFree), Rel, R);
-    }
+    kernel::hold_drop(r);
+    give_up(r, p->seq);
 }
 
 int call(int rtpu, Kind kind, const void* req, std::uint32_t len, void* reply, std::uint32_t cap,
          std::uint32_t* reply_len, std::uint64_t timeout_ns) {
     if (reply_len) *reply_len = 0;
+    kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     Pending p;
     if (int e = post(rtpu, kind, req, len, timeout_ns, &p)) return e;
     return await(&p, reply, cap, reply_len);

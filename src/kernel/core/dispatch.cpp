@@ -315,7 +315,7 @@ int block_current_locked() {
 void deliver_pending_slow_locked() {
     for (;;) {
         Tcb* cur = g_k.current;
-        if (!cur) return;
+        if (!cur || (cur->call_depth && !cur->at_cancel_point)) return;  // held for the call's wait or return
         if (cur->miss_pending) {
             deliver_deadline_miss_locked(cur);  // time/deadline.cpp
             continue;

@@ -7,6 +7,7 @@
 #include "err/err_internal.hpp"
 #include "core/fiber_asan.hpp"
 #include "kernel.hpp"
+#include "task/holds.hpp"
 #include "kernel/mem/heap.hpp"
 #include "sync/remote_wait.hpp"
 
@@ -133,6 +134,7 @@ int chm_kernel_init(const chm_kernel_config_t* cfg) {
     }
     if (int e = err_kernel_init()) return e;  // processor exceptions (err/fault.cpp)
     g_k.initialised = true;
+    g_tasks_exist = true;  // backplane calls now track tasks' holds (task/holds.hpp)
     return 0;
 }
 

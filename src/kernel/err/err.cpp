@@ -134,6 +134,10 @@ chm_err_action_t run_handlers(ErrTask* e, const chm_err_info_t& info) {
     e->mark = m;  // marks set after it are gone with their frames
     e->scope = static_cast<ErrScope*>(m->link[1]);
     e->depth = m->depth;
+    // The backplane calls entered since the mark are left with their
+    // frames: what they hold is given back, and an end or restart owed to
+    // them is carried out now (task/holds.hpp).
+    task_leave_calls_to(static_cast<Tcb*>(m->link[2]), unsigned(m->code) & 0xFF, (unsigned(m->code) >> 8) & 0xFF);
     std::longjmp(m->jb, code > 0 ? code : 1);
 }
 
@@ -380,7 +384,9 @@ jmp_buf* chm_err_mark_arm_(chm_err_mark_t* m) {
     m->link[1] = e->scope;
     m->link[2] = cur;
     m->magic = kMarkMagic;
-    m->code = 0;
+    // `code` (not read otherwise) keeps the task's backplane holds and
+    // call depth at this mark, for a return to it from inside a call.
+    m->code = int(cur->nholds | unsigned(cur->call_depth) << 8);
     m->depth = e->depth;
     return &m->jb;
 }

@@ -4,6 +4,7 @@
 #include <cerrno>
 
 #include "kernel.hpp"
+#include "task/holds.hpp"
 #include "sync/remote_wait.hpp"
 
 namespace chm::kernel {
@@ -212,8 +213,9 @@ std::uint32_t remote_wait_initial_word() {
 
 bool clock_is_virtual() { return g_k.cfg.virtual_clock != 0; }
 
-int remote_wait(std::uint32_t* word, std::uint64_t deadline) {
-    if (!remote_wait_possible()) return -EPERM;
+namespace {
+
+int wait_for_word(std::uint32_t* word, std::uint64_t deadline) {
     const std::uint32_t v = __atomic_load_n(word, __ATOMIC_ACQUIRE);
     if (word_granted(v)) return 0;
     Tcb* cur = g_k.current;
@@ -263,6 +265,30 @@ int remote_wait(std::uint32_t* word, std::uint64_t deadline) {
     const int r = block_current_locked();
     cur->rword = nullptr;
     deliver_pending_locked();
+    return r;
+}
+
+}  // namespace
+
+int remote_wait(std::uint32_t* word, std::uint64_t deadline) {
+    if (!remote_wait_possible()) return -EPERM;
+    // The wait of a backplane call is its cancellation point: handlers
+    // held back while it ran may run here, and a destroy or abort-cycle
+    // owed to the task ends the wait (-EINTR: the call withdraws as for
+    // a user signal, and the owed end follows when it returns). A grant
+    // already taken is kept: the call completes first.
+    Tcb* cur = g_k.current;
+    const bool was = cur->at_cancel_point;
+    cur->at_cancel_point = true;
+    int r;
+    {
+        IrqGuard guard;
+        deliver_pending_locked();
+    }
+    if (cancel_owed()) r = word_granted(__atomic_load_n(word, __ATOMIC_ACQUIRE)) ? 0 : -EINTR;
+    else r = wait_for_word(word, deadline);
+    if (r != 0 && cancel_owed()) r = -EINTR;
+    cur->at_cancel_point = was;
     return r;
 }
 

@@ -42,6 +42,7 @@ TaskExt* ext_locked(Tcb* t) {
 }  // namespace
 
 void task_run_end_hooks(Tcb* t) {
+    task_release_holds(t);  // backplane locks and records first: others wait on them
     // Each hook is taken off the list before it runs: one that faults or
     // ends the task some other way is not run twice, and the rest still run
     // (the end that follows calls this again).

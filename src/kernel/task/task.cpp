@@ -257,6 +257,12 @@ int chm_task_destroy(chm_tid_t id) {
         IrqGuard guard;
         t = tcb_lookup(id);
         if (!t) return raise_or_return(-ESRCH, "chm_task_destroy");
+        // Inside a backplane call: it ends when the call returns or
+        // reaches its wait (task/holds.hpp), never with an object locked.
+        if (task_owe_end_locked(t)) {
+            if (t != g_k.current) reschedule_locked();
+            return 0;
+        }
         if (t == g_k.current) {
             port::irq_restore();
             task_end_current(CHM_TASK_EXITED, 0);
@@ -269,7 +275,7 @@ int chm_task_destroy(chm_tid_t id) {
             t->state = TaskState::Suspended;
         }
     }
-    if (t->ext) task_run_end_hooks(t);  // (only this task's own calls create it)
+    task_run_end_hooks(t);  // its holds, then hooks (only its own calls make those)
     IrqGuard guard;
     if (tid_of(t) == id && t->state != TaskState::Ended) {  // nobody ended it meanwhile
         t->end_reason = CHM_TASK_DESTROYED;

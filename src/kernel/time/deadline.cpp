@@ -60,7 +60,9 @@ void deliver_deadline_miss_locked(Tcb* cur) {
         port::irq_restore();
         chm_kernel_stop(0);
     }
-    if (act == CHM_DL_ABORT_CYCLE) {
+    if (act == CHM_DL_ABORT_CYCLE && cur->call_depth) {
+        cur->abort_cycle_owed = true;  // at a backplane call's wait: done when the call returns
+    } else if (act == CHM_DL_ABORT_CYCLE) {
         cur->abort_cycle = true;
         port::irq_restore();
         chm_task_wait_period();  // restarts the entry at the next release
