@@ -1,0 +1,186 @@
+// The soak's chaos phase: every 10 ms, bring processes through their
+// states (restart the dead, continue the stopped, reap the terminated),
+// sample every survivor's heartbeat, and at random instants kill (-9),
+// stop (SIGSTOP for a random time) or terminate (SIGTERM: the graceful
+// stop protocol, RTPUs only) a random worker.
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
+
+#include <signal.h>
+#include <sys/wait.h>
+
+#include "soak.hpp"
+
+namespace soak {
+
+void Driver::chaos_phase() {
+    const uint64_t end = t0_ + uint64_t(opt_.seconds) * 1000000000u;
+    uint64_t next_print = t0_ + 10000000000u;
+    next_action_ = now_ns() + rnd_range(opt_.gap_min_ms, opt_.gap_max_ms) * 1000000u;
+    while (now_ns() < end) {
+        tick(true);
+        if (!opt_.quiet && now_ns() >= next_print) {
+            next_print += 10000000000u;
+            uint64_t sent = 0, recv = 0, pv = 0;
+            for (unsigned i = 0; i < led_->workers; ++i) {
+                sent += led_->w[i].sends_ok;
+                recv += led_->w[i].recvs_ok;
+                pv += led_->w[i].p_ok;
+            }
+            std::printf("soak: %3llu s: kills %llu, stops %llu, terms %llu, restarts %llu; sent %llu, "
+                        "received %llu, P/V %llu; worst stall %.1f ms\n",
+                        (unsigned long long)((now_ns() - t0_) / 1000000000u), (unsigned long long)n_.kills,
+                        (unsigned long long)n_.stops, (unsigned long long)n_.terms,
+                        (unsigned long long)n_.restarts, (unsigned long long)sent, (unsigned long long)recv,
+                        (unsigned long long)pv, worst_.ns / 1e6);
+            std::fflush(stdout);
+        }
+        nap_ms(10);
+    }
+}
+
+// One step of every process's life; chaos: also act when an action is due.
+void Driver::tick(bool chaos) {
+    const uint64_t now = now_ns();
+    if (last_tick_ && now - last_tick_ > worst_tick_gap_) worst_tick_gap_ = now - last_tick_;
+    last_tick_ = now;
+    for (Proc& p : procs_) {
+        int st = 0;
+        switch (p.state) {
+        case Proc::Down:
+            if (now >= p.due) {
+                start(p);
+                ++n_.restarts;
+            }
+            break;
+        case Proc::Starting:
+        case Proc::Up:
+            if (p.state == Proc::Starting && led_->w[p.id].started == led_->w[p.id].inc) {
+                p.state = Proc::Up;
+                p.floor = now;
+            }
+            if (waitpid(p.pid, &st, WNOHANG) == p.pid) {  // it ended on its own: never expected
+                p.pid = -1;
+                failure(p.name() + " ended on its own: " +
+                        (WIFEXITED(st) ? "exit " + std::to_string(WEXITSTATUS(st))
+                                       : std::string("signal ") + strsignal(WTERMSIG(st))) +
+                        " (its log: " + dir_ + "/worker" + std::to_string(p.id) + ".log)");
+                absorb_death(p);
+                p.state = Proc::Down;
+                p.due = now + 100000000u;
+            } else if (p.state == Proc::Starting && now - p.since > 15000000000ull) {
+                failure(p.name() + " did not start within 15 s");
+                kill(p.pid, SIGKILL);
+                if (reap(p, 5000, &st)) absorb_death(p);
+                p.state = Proc::Down;
+                p.due = now;
+            }
+            break;
+        case Proc::Stopped:
+            if (now >= p.due) {
+                kill(p.pid, SIGCONT);
+                p.state = Proc::Up;
+                p.floor = now;  // its own gap while stopped is not a stall
+            }
+            break;
+        case Proc::Terminating:
+            if (waitpid(p.pid, &st, WNOHANG) == p.pid) {
+                p.pid = -1;
+                if (!WIFEXITED(st) || WEXITSTATUS(st) != 0)
+                    failure(p.name() + " stopped by SIGTERM ended with status " + std::to_string(st));
+                absorb_death(p);
+                p.state = Proc::Down;
+                p.due = now + rnd_range(0, 300) * 1000000u;
+            } else if (now - p.since > 10000000000ull) {
+                failure(p.name() + " did not stop within 10 s of SIGTERM");
+                kill(p.pid, SIGKILL);
+                if (reap(p, 5000, &st)) absorb_death(p);
+                p.state = Proc::Down;
+                p.due = now;
+            }
+            break;
+        }
+    }
+    watch_stalls();
+    if (chaos && now >= next_action_) {
+        act();
+        next_action_ = now_ns() + rnd_range(opt_.gap_min_ms, opt_.gap_max_ms) * 1000000u;
+    }
+}
+
+// Pick a worker and do one of kill, stop, terminate to it. At most one
+// process is stopped at a time and at most two are down (dead, starting or
+// terminating) at a time, so traffic never stops.
+void Driver::act() {
+    unsigned down = 0, stopped = 0;
+    for (const Proc& p : procs_) {
+        down += p.state == Proc::Down || p.state == Proc::Starting || p.state == Proc::Terminating;
+        stopped += p.state == Proc::Stopped;
+    }
+    std::vector<Proc*> cand;
+    for (Proc& p : procs_)
+        if (p.state == Proc::Up || p.state == Proc::Stopped) cand.push_back(&p);
+    if (cand.empty() || down >= 2) return;
+    Proc& p = *cand[rnd() % cand.size()];
+    const uint64_t k = rnd() % 100;
+    ++n_.actions;
+    if (p.state == Proc::Up && !stopped && k < 40) {
+        kill(p.pid, SIGSTOP);
+        p.state = Proc::Stopped;
+        p.since = now_ns();
+        p.due = p.since + rnd_range(20, opt_.stop_max_ms) * 1000000u;
+        ++n_.stops;
+    } else if (p.state == Proc::Up && p.rtpu && k >= 80) {
+        kill(p.pid, SIGTERM);  // graceful: the RTPU leaves with its task inside a call
+        p.state = Proc::Terminating;
+        p.since = now_ns();
+        p.killed = true;
+        ++n_.terms;
+    } else {
+        const bool was_stopped = p.state == Proc::Stopped;
+        kill(p.pid, SIGKILL);
+        int st = 0;
+        if (!reap(p, 10000, &st)) {
+            failure(p.name() + " (pid " + std::to_string(p.pid) + ") not gone 10 s after SIGKILL");
+            return;
+        }
+        absorb_death(p);
+        p.state = Proc::Down;
+        p.since = now_ns();
+        p.due = p.since + rnd_range(0, 300) * 1000000u;
+        p.killed = true;
+        ++n_.kills;
+        ++(p.rtpu ? n_.kills_rtpu : n_.kills_host);
+        n_.kills_stopped += was_stopped;
+    }
+}
+
+// A survivor (up, not stopped) must finish an operation at least every
+// bound_ns_. Its gap counts from its last heartbeat, or from its start or
+// SIGCONT when later.
+void Driver::watch_stalls() {
+    const uint64_t now = now_ns();
+    std::string stopped;
+    for (const Proc& p : procs_)
+        if (p.state == Proc::Stopped) stopped = p.name();
+    for (Proc& p : procs_) {
+        if (p.state != Proc::Up) continue;
+        const soak_worker_t& w = led_->w[p.id];
+        const uint64_t hb = __atomic_load_n(&w.hb_ns, __ATOMIC_SEQ_CST);
+        const uint64_t from = hb > p.floor ? hb : p.floor;
+        if (now <= from) continue;
+        const uint64_t gap = now - from;
+        ++n_.stall_samples;
+        if (gap > worst_per_worker_[p.id]) worst_per_worker_[p.id] = gap;
+        if (gap > worst_.ns) worst_ = {gap, p.id, w.op, stopped};
+        if (gap > bound_ns_ && p.stall_reported != from) {  // each stall once
+            p.stall_reported = from;
+            failure(p.name() + " stalled " + std::to_string(gap / 1000000u) + " ms (bound " +
+                    std::to_string(bound_ns_ / 1000000u) + " ms) in operation " + std::to_string(w.op) +
+                    (stopped.empty() ? "" : ", " + stopped + " stopped"));
+        }
+    }
+}
+
+}  // namespace soak

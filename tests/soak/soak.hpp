@@ -1,0 +1,118 @@
+// The chaos soak's driver (docs/backplane.md, "Chaos soak"): shared state
+// of main.cpp (setup and report), procs.cpp (worker processes), chaos.cpp
+// (the random kills, stops and restarts, and the stall watch) and
+// finish.cpp (the orderly end and every check).
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <sys/types.h>
+
+#include "chimera/msgq.h"
+#include "chimera/rsem.h"
+
+extern "C" {
+#include "ledger.h"
+#include "worker.h"
+}
+
+namespace soak {
+
+struct Options {
+    unsigned seconds = 600;
+    uint64_t seed = 0;         // 0: from the clock (printed either way)
+    unsigned rtpus = 3, hosts = 2;
+    unsigned sem_units = 2;
+    unsigned stop_max_ms = 1000;  // longest SIGSTOP
+    unsigned slack_ms = 5000;     // scheduling allowance of the stall bound (loaded shared host)
+    unsigned gap_min_ms = 100, gap_max_ms = 500; // between chaos actions
+    // The programs it runs; meson builds the paths in (soak/meson.build).
+    std::string rtpu_bin = SOAK_RTPU_BIN, host_bin = SOAK_HOST_BIN, worker_so = SOAK_WORKER_SO,
+                bpcheck_bin = SOAK_BPCHECK_BIN;
+    bool quiet = false;
+};
+
+// One worker: an RTPU process running worker.c as a task, or a host process.
+struct Proc {
+    enum State { Down, Starting, Up, Stopped, Terminating };
+    unsigned id = 0;
+    int rtpu = 0;         // RTPU number (1..), 0 for a host
+    pid_t pid = -1;
+    State state = Down;
+    uint64_t since = 0;   // when it entered `state`
+    uint64_t floor = 0;   // heartbeats before this do not count (start, SIGCONT)
+    uint64_t due = 0;     // Down: restart time; Stopped: SIGCONT time
+    bool killed = false;  // we sent SIGKILL or SIGTERM: its end is expected
+    uint64_t stall_reported = 0;  // the heartbeat whose overlong gap was reported
+    std::string name() const;
+};
+
+struct Counts {
+    uint64_t kills = 0, kills_rtpu = 0, kills_host = 0, kills_stopped = 0;
+    uint64_t terms = 0, stops = 0, restarts = 0, actions = 0;
+    uint64_t units_returned = 0, sem_doubt = 0, shm_doubt = 0, dead_bufs_partial = 0;
+    uint64_t stall_samples = 0;
+};
+
+// The worst stall one survivor showed, and what it was doing.
+struct Stall {
+    uint64_t ns = 0;
+    unsigned worker = 0;
+    uint32_t op = 0;
+    std::string peer_stopped;  // the process stopped meanwhile, if any
+};
+
+class Driver {
+public:
+    explicit Driver(Options o) : opt_(std::move(o)) {}
+    int run();  // the whole soak; 0 when every check held
+
+    // procs.cpp
+    void start(Proc& p);
+    bool reap(Proc& p, int timeout_ms, int* status);
+    void absorb_death(Proc& p);
+    std::vector<pid_t> leftover_processes() const;
+
+    // chaos.cpp
+    void chaos_phase();
+    void tick(bool chaos);
+    void act();
+    void watch_stalls();
+
+    // finish.cpp
+    void finish();
+    void quiesce();
+    void drain_and_account();
+    void check_sem_and_shm();
+    void check_file_and_leftovers();
+
+    void failure(const std::string& what);
+    uint64_t rnd();
+    uint64_t rnd_range(uint64_t lo, uint64_t hi) { return lo + rnd() % (hi - lo + 1); }
+
+    Options opt_;
+    std::string dir_, bp_, ledger_path_;
+    soak_ledger_t* led_ = nullptr;
+    std::vector<Proc> procs_;
+    chm_msgq_t* q_[SOAK_QUEUES] = {};
+    chm_rsem_t* sem_ = nullptr;
+    soak_shm_t* shm_ = nullptr;
+    uint64_t rng_ = 0, t0_ = 0, next_action_ = 0, last_tick_ = 0, worst_tick_gap_ = 0;
+    uint64_t bound_ns_ = 0;
+    Counts n_;
+    Stall worst_;
+    std::vector<uint64_t> worst_per_worker_;
+    std::vector<std::set<uint32_t>> doubt_;  // per sender: sequences whose send a death left in doubt
+    std::vector<soak_msg_t> dead_bufs_;      // complete messages found in dead receivers' buffers
+    std::vector<std::string> failures_;
+    std::map<std::string, std::string> report_;  // key = value lines of the summary
+};
+
+uint64_t now_ns();
+void nap_ms(unsigned ms);
+
+}  // namespace soak
