@@ -103,6 +103,7 @@ void Driver::tick(bool chaos) {
         }
     }
     watch_stalls();
+    if (chaos) watch_objects();
     if (chaos && now >= next_action_) {
         act();
         next_action_ = now_ns() + rnd_range(opt_.gap_min_ms, opt_.gap_max_ms) * 1000000u;
@@ -179,6 +180,41 @@ void Driver::watch_stalls() {
             failure(p.name() + " stalled " + std::to_string(gap / 1000000u) + " ms (bound " +
                     std::to_string(bound_ns_ / 1000000u) + " ms) in operation " + std::to_string(w.op) +
                     (stopped.empty() ? "" : ", " + stopped + " stopped"));
+        }
+    }
+}
+
+namespace {
+const char* object_name(unsigned k) {
+    static const char* const names[SOAK_OBJECTS] = {"soak.q0", "soak.q1", "soak.q2", "soak.sem", "soak.shm"};
+    return names[k];
+}
+}  // namespace
+
+// Every object must serve someone within the bound: a queue a send or a
+// receive, soak.sem a P, soak.shm a write. A worker's own heartbeat would
+// not show an object nobody can use any more (a lock never taken over, a
+// unit never given back): its calls would all time out in bound.
+void Driver::watch_objects() {
+    const uint64_t now = now_ns();
+    if (!obj_floor_) {
+        for (const Proc& p : procs_)
+            if (p.state != Proc::Up) return;
+        obj_floor_ = now;
+    }
+    for (unsigned k = 0; k < SOAK_OBJECTS; ++k) {
+        const uint64_t ok = __atomic_load_n(&led_->ok_ns[k], __ATOMIC_SEQ_CST);
+        const uint64_t from = ok > obj_floor_ ? ok : obj_floor_;
+        if (now <= from) continue;
+        const uint64_t gap = now - from;
+        if (gap > worst_obj_ns_) {
+            worst_obj_ns_ = gap;
+            worst_obj_ = k;
+        }
+        if (gap > bound_ns_ && obj_reported_[k] != from) {
+            obj_reported_[k] = from;
+            failure(std::string(object_name(k)) + " served nobody for " + std::to_string(gap / 1000000u) +
+                    " ms (bound " + std::to_string(bound_ns_ / 1000000u) + " ms)");
         }
     }
 }

@@ -206,6 +206,14 @@ void Driver::check_sem_and_shm() {
 // Leave the backplane, run chimera-bpcheck on the file at rest, remove the
 // directory, and look for anything left: processes naming it, the directory.
 void Driver::check_file_and_leftovers() {
+    chm_bp_status_t st{};
+    if (chm_bp_status(&st) == 0) {
+        unsigned others = 0;
+        for (std::uint32_t i = 0; i < st.slots; ++i)
+            if (int(i) != st.self && st.slot[i].state != CHM_BP_FREE && st.slot[i].state != CHM_BP_DEAD) ++others;
+        if (others) failure(num(others) + " slots still taken after every worker ended");
+        report_["backplane_recoveries"] = num(st.recoveries);
+    }
     for (chm_msgq_t* q : q_)
         if (chm_msgq_close(q) != 0) failure("closing a queue");
     if (chm_rsem_close(sem_) != 0) failure("closing soak.sem");
@@ -213,16 +221,16 @@ void Driver::check_file_and_leftovers() {
     if (chm_bp_leave() != 0) failure(std::string("leaving the backplane: ") + chm_bp_last_error());
     const std::string out = dir_ + "/bpcheck.out";
     const std::string cmd = opt_.bpcheck_bin + " " + bp_ + " > " + out + " 2>&1";
-    const int st = std::system(cmd.c_str());
+    const int cst = std::system(cmd.c_str());
     std::string text;
     if (FILE* f = std::fopen(out.c_str(), "r")) {
         char line[512];
         while (std::fgets(line, sizeof line, f)) text += line;
         std::fclose(f);
     }
-    const bool clean = WIFEXITED(st) && WEXITSTATUS(st) == 0;
+    const bool clean = WIFEXITED(cst) && WEXITSTATUS(cst) == 0;
     report_["checker"] = clean ? "clean" : "PROBLEMS";
-    if (!clean) failure("chimera-bpcheck exit " + std::to_string(WEXITSTATUS(st)) + ":\n" + text);
+    if (!clean) failure("chimera-bpcheck exit " + std::to_string(WEXITSTATUS(cst)) + ":\n" + text);
     for (const Proc& p : procs_)
         if (p.pid > 0) failure(p.name() + " still has a process");
     const std::vector<pid_t> left = leftover_processes();

@@ -22,6 +22,10 @@
 #define SOAK_PAD_MAX (SOAK_MSG_MAX - 24)
 #define SOAK_OP_TIMEOUT_NS 200000000ull /* every blocking call: 200 ms */
 #define SOAK_SHM_WORDS 8
+/* Objects whose progress the driver watches: the queues, then these two. */
+#define SOAK_OBJ_SEM SOAK_QUEUES
+#define SOAK_OBJ_SHM (SOAK_QUEUES + 1)
+#define SOAK_OBJECTS (SOAK_QUEUES + 2)
 
 /* What a worker was doing (op) and the in-flight states the driver reads
  * after a death. */
@@ -66,6 +70,7 @@ typedef struct soak_ledger {
     uint32_t magic, workers;
     uint32_t sem_units; /* soak.sem's initial count */
     uint32_t reserved;
+    uint64_t ok_ns[SOAK_OBJECTS]; /* CLOCK_MONOTONIC of each object's last successful operation */
     soak_worker_t w[SOAK_MAX_WORKERS];
 } soak_ledger_t;
 

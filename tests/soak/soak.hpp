@@ -82,6 +82,7 @@ public:
     void tick(bool chaos);
     void act();
     void watch_stalls();
+    void watch_objects();
 
     // finish.cpp
     void finish();
@@ -105,6 +106,11 @@ public:
     uint64_t bound_ns_ = 0;
     Counts n_;
     Stall worst_;
+    // Objects (SOAK_OBJ_*): each must do its job (a message in or out, a
+    // P, a write) within the bound, from the moment every worker was first up.
+    uint64_t obj_floor_ = 0, worst_obj_ns_ = 0;
+    unsigned worst_obj_ = 0;
+    uint64_t obj_reported_[SOAK_OBJECTS] = {};
     std::vector<uint64_t> worst_per_worker_;
     std::vector<std::set<uint32_t>> doubt_;  // per sender: sequences whose send a death left in doubt
     std::vector<soak_msg_t> dead_bufs_;      // complete messages found in dead receivers' buffers

@@ -61,6 +61,9 @@ static void nap_us(uint64_t us) {
     nanosleep(&ts, NULL); /* a task: the kernel's pause (libchimera interposes it) */
 }
 
+/* Object k (SOAK_OBJ_*, or a queue's index) just did its job. */
+static void progress(ctx_t* c, unsigned k) { ST(c->l->ok_ns[k], now_ns()); }
+
 static void fail(ctx_t* c, int status, unsigned op) {
     ++c->me->errors;
     c->me->last_err = status;
@@ -82,11 +85,13 @@ static void do_send(ctx_t* c) {
     m.sum = soak_msg_sum(&m);
     ST(me->last_seq, seq); /* taken before the call: a death from here on leaves it in doubt */
     ST(me->send_state, SOAK_SEND_PENDING);
-    const int r = chm_msgq_send_timed(c->q[rnd(c) % SOAK_QUEUES], 1, (uint32_t)(rnd(c) % 4), &m, m.len,
+    const unsigned qi = (unsigned)(rnd(c) % SOAK_QUEUES);
+    const int r = chm_msgq_send_timed(c->q[qi], 1, (uint32_t)(rnd(c) % 4), &m, m.len,
                                       timeout(c));
     if (r == 0) {
         __atomic_fetch_or(&soak_sent_bits(c->l, c->id)[seq >> 3], (uint8_t)(1u << (seq & 7)), __ATOMIC_SEQ_CST);
         ++me->sends_ok;
+        progress(c, qi);
     } else if (expired(r)) {
         ++me->send_timeouts; /* nothing was queued: it must never arrive */
     } else {
@@ -100,7 +105,8 @@ static void do_recv(ctx_t* c) {
     ST(me->rbuf.magic, 0u);
     ST(me->recv_state, 1u);
     chm_msgq_msg_info_t info;
-    const int r = chm_msgq_receive_timed(c->q[rnd(c) % SOAK_QUEUES], &me->rbuf, sizeof me->rbuf, &info,
+    const unsigned qi = (unsigned)(rnd(c) % SOAK_QUEUES);
+    const int r = chm_msgq_receive_timed(c->q[qi], &me->rbuf, sizeof me->rbuf, &info,
                                          timeout(c));
     if (r >= 0) {
         if (!soak_msg_ok(&me->rbuf, r, c->l->workers)) {
@@ -112,6 +118,7 @@ static void do_recv(ctx_t* c) {
             const uint8_t was = __atomic_fetch_or(byte, (uint8_t)(1u << (seq & 7)), __ATOMIC_SEQ_CST);
             if (was & (1u << (seq & 7))) ++me->dups;
             ++me->recvs_ok;
+            progress(c, qi);
         }
     } else if (expired(r)) {
         ++me->recv_timeouts;
@@ -138,6 +145,7 @@ static void do_pv(ctx_t* c) {
     }
     ST(me->sem_state, SOAK_SEM_HELD);
     ++me->p_ok;
+    progress(c, SOAK_OBJ_SEM);
     nap_us(rnd(c) % 2000); /* hold the unit a while: others wait for it */
     ST(me->sem_state, SOAK_SEM_V);
     r = chm_rsem_v(c->sem);
@@ -181,6 +189,7 @@ static void do_shm_write(ctx_t* c) {
     for (int i = 0; i < SOAK_SHM_WORDS; ++i) ST(s->word[i], v);
     ST(s->seq, LD(s->seq) + 1u);
     ++me->shm_writes;
+    progress(c, SOAK_OBJ_SHM);
     ST(me->shm_state, SOAK_SHM_UNLOCKING);
     const int u = chm_spin_unlock(&s->lock);
     if (u != 0) fail(c, u, SOAK_OP_SHM_WRITE);
