@@ -178,7 +178,7 @@ void Driver::watch_stalls() {
         if (gap > bound_ns_ && p.stall_reported != from) {  // each stall once
             p.stall_reported = from;
             failure(p.name() + " stalled " + std::to_string(gap / 1000000u) + " ms (bound " +
-                    std::to_string(bound_ns_ / 1000000u) + " ms) in operation " + std::to_string(w.op) +
+                    std::to_string(bound_ns_ / 1000000u) + " ms) in operation " + op_name(w.op) +
                     (stopped.empty() ? "" : ", " + stopped + " stopped"));
         }
     }

@@ -50,8 +50,8 @@ void Driver::quiesce() {
         if (p.state != Proc::Up) continue;
         const soak_worker_t& w = led_->w[p.id];
         while (__atomic_load_n(&w.done, __ATOMIC_SEQ_CST) != w.inc && now_ns() < done_by) nap_ms(5);
-        if (w.done != w.inc) failure(p.name() + " did not finish its operation within 10 s of quit (op " +
-                                     num(w.op) + ")");
+        if (w.done != w.inc) failure(p.name() + " did not finish its operation within 10 s of quit (" +
+                                     op_name(w.op) + ")");
     }
     for (Proc& p : procs_)
         if (p.pid > 0 && p.rtpu) kill(p.pid, SIGTERM);
@@ -124,7 +124,7 @@ void Driver::drain_and_account() {
         pv += w.p_ok;
         if (w.errors)
             failure("worker " + num(s) + ": " + num(w.errors) + " unexpected statuses, the last " +
-                    std::to_string(w.last_err) + " in operation " + num(w.last_err_op));
+                    std::to_string(w.last_err) + " in operation " + op_name(w.last_err_op));
         const uint8_t* sb = soak_sent_bits(led_, s);
         const uint8_t* rb = soak_recv_bits(led_, s);
         for (uint32_t seq = 1; seq <= w.last_seq && seq < SOAK_SEQ_CAP; ++seq) {

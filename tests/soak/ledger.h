@@ -60,9 +60,6 @@ typedef struct soak_worker {
     uint64_t errors;                  /* unexpected statuses */
     int32_t last_err;
     uint32_t last_err_op;
-    uint64_t max_op_ns;               /* longest single operation */
-    uint32_t max_op_kind;
-    uint32_t reserved;
     soak_msg_t rbuf;                  /* receive buffer: valid while magic is set */
 } soak_worker_t;
 

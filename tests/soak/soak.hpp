@@ -119,6 +119,10 @@ public:
 };
 
 uint64_t now_ns();
+inline const char* op_name(uint32_t op) {
+    static const char* const names[SOAK_OP_COUNT] = {"none", "send", "receive", "P/V", "shm write", "shm read", "pause"};
+    return op < SOAK_OP_COUNT ? names[op] : "?";
+}
 void nap_ms(unsigned ms);
 
 }  // namespace soak

@@ -256,7 +256,7 @@ int soak_worker_run(const char* ledger_path, unsigned id, uint32_t inc, uint64_t
     ST(c.me->started, inc);
     while (!LD(c.me->quit)) {
         nap_us(rnd(&c) % 200); /* a gap between operations: ~5,000 a second at most */
-        const uint64_t k = rnd(&c) % 100, t0 = now_ns();
+        const uint64_t k = rnd(&c) % 100;
         unsigned op = k < 30 ? SOAK_OP_SEND : k < 60 ? SOAK_OP_RECV : k < 75 ? SOAK_OP_PV
                     : k < 85 ? SOAK_OP_SHM_WRITE : k < 95 ? SOAK_OP_SHM_READ : SOAK_OP_PAUSE;
         ST(c.me->op, op);
@@ -268,14 +268,9 @@ int soak_worker_run(const char* ledger_path, unsigned id, uint32_t inc, uint64_t
         case SOAK_OP_SHM_READ: do_shm_read(&c); break;
         default: nap_us(rnd(&c) % 1000); break;
         }
-        const uint64_t t1 = now_ns();
-        if (t1 - t0 > c.me->max_op_ns) {
-            c.me->max_op_ns = t1 - t0;
-            c.me->max_op_kind = op;
-        }
         ++c.me->op_count[op];
         ST(c.me->op, (uint32_t)SOAK_OP_IDLE);
-        ST(c.me->hb_ns, t1);
+        ST(c.me->hb_ns, now_ns());
     }
     ST(c.me->done, inc);
     return 0;
