@@ -18,7 +18,7 @@ void Driver::chaos_phase() {
     const uint64_t end = t0_ + uint64_t(opt_.seconds) * 1000000000u;
     uint64_t next_print = t0_ + 10000000000u;
     next_action_ = now_ns() + rnd_range(opt_.gap_min_ms, opt_.gap_max_ms) * 1000000u;
-    while (now_ns() < end) {
+    while (now_ns() < end && !g_interrupted) {
         tick(true);
         if (!opt_.quiet && now_ns() >= next_print) {
             next_print += 10000000000u;
@@ -40,6 +40,12 @@ void Driver::chaos_phase() {
     }
 }
 
+bool Driver::all_started(const Proc& p) const {
+    for (unsigned i : p.ids)
+        if (__atomic_load_n(&led_->w[i].started, __ATOMIC_SEQ_CST) != led_->w[i].inc) return false;
+    return true;
+}
+
 // One step of every process's life; chaos: also act when an action is due.
 void Driver::tick(bool chaos) {
     const uint64_t now = now_ns();
@@ -52,11 +58,15 @@ void Driver::tick(bool chaos) {
             if (now >= p.due) {
                 start(p);
                 ++n_.restarts;
+                // A quarter of the restarts are struck again 0-15 ms in
+                // (a start takes a few tens of ms), while the process
+                // joins, loads or opens: the join and recovery races.
+                if (chaos && rnd() % 4 == 0) strike(p);
             }
             break;
         case Proc::Starting:
         case Proc::Up:
-            if (p.state == Proc::Starting && led_->w[p.id].started == led_->w[p.id].inc) {
+            if (p.state == Proc::Starting && all_started(p)) {
                 p.state = Proc::Up;
                 p.floor = now;
             }
@@ -80,7 +90,7 @@ void Driver::tick(bool chaos) {
         case Proc::Stopped:
             if (now >= p.due) {
                 kill(p.pid, SIGCONT);
-                p.state = Proc::Up;
+                p.state = p.resume;
                 p.floor = now;  // its own gap while stopped is not a stall
             }
             break;
@@ -112,7 +122,9 @@ void Driver::tick(bool chaos) {
 
 // Pick a worker and do one of kill, stop, terminate to it. At most one
 // process is stopped at a time and at most two are down (dead, starting or
-// terminating) at a time, so traffic never stops.
+// terminating) at a time, so traffic never stops; a process still starting
+// (joining the backplane, loading its program) may be stopped or killed
+// whatever the count, since it is down already.
 void Driver::act() {
     unsigned down = 0, stopped = 0;
     for (const Proc& p : procs_) {
@@ -121,17 +133,14 @@ void Driver::act() {
     }
     std::vector<Proc*> cand;
     for (Proc& p : procs_)
-        if (p.state == Proc::Up || p.state == Proc::Stopped) cand.push_back(&p);
-    if (cand.empty() || down >= 2) return;
+        if (p.state == Proc::Starting || ((p.state == Proc::Up || p.state == Proc::Stopped) && down < 2))
+            cand.push_back(&p);
+    if (cand.empty()) return;
     Proc& p = *cand[rnd() % cand.size()];
     const uint64_t k = rnd() % 100;
     ++n_.actions;
-    if (p.state == Proc::Up && !stopped && k < 40) {
-        kill(p.pid, SIGSTOP);
-        p.state = Proc::Stopped;
-        p.since = now_ns();
-        p.due = p.since + rnd_range(20, opt_.stop_max_ms) * 1000000u;
-        ++n_.stops;
+    if ((p.state == Proc::Up || p.state == Proc::Starting) && !stopped && k < 40) {
+        do_stop(p);
     } else if (p.state == Proc::Up && p.rtpu && k >= 80) {
         kill(p.pid, SIGTERM);  // graceful: the RTPU leaves with its task inside a call
         p.state = Proc::Terminating;
@@ -139,22 +148,46 @@ void Driver::act() {
         p.killed = true;
         ++n_.terms;
     } else {
-        const bool was_stopped = p.state == Proc::Stopped;
-        kill(p.pid, SIGKILL);
-        int st = 0;
-        if (!reap(p, 10000, &st)) {
-            failure(p.name() + " (pid " + std::to_string(p.pid) + ") not gone 10 s after SIGKILL");
-            return;
-        }
-        absorb_death(p);
-        p.state = Proc::Down;
-        p.since = now_ns();
-        p.due = p.since + rnd_range(0, 300) * 1000000u;
-        p.killed = true;
-        ++n_.kills;
-        ++(p.rtpu ? n_.kills_rtpu : n_.kills_host);
-        n_.kills_stopped += was_stopped;
+        do_kill(p);
     }
+}
+
+void Driver::strike(Proc& p) {
+    nap_ms(unsigned(rnd_range(0, 15)));
+    bool stopped = false;
+    for (const Proc& o : procs_) stopped |= o.state == Proc::Stopped;
+    ++n_.actions;
+    if (!stopped && rnd() % 2) do_stop(p);
+    else do_kill(p);
+}
+
+void Driver::do_stop(Proc& p) {
+    kill(p.pid, SIGSTOP);
+    n_.stops_starting += p.state == Proc::Starting;
+    p.resume = p.state;
+    p.state = Proc::Stopped;
+    p.due = now_ns() + rnd_range(20, opt_.stop_max_ms) * 1000000u;
+    ++n_.stops;
+}
+
+void Driver::do_kill(Proc& p) {
+    const bool was_stopped = p.state == Proc::Stopped;
+    const bool was_starting = p.state == Proc::Starting || (was_stopped && p.resume == Proc::Starting);
+    kill(p.pid, SIGKILL);
+    int st = 0;
+    if (!reap(p, 10000, &st)) {
+        failure(p.name() + " (pid " + std::to_string(p.pid) + ") not gone 10 s after SIGKILL");
+        return;
+    }
+    absorb_death(p);
+    p.state = Proc::Down;
+    p.since = now_ns();
+    p.due = p.since + rnd_range(0, 300) * 1000000u;
+    p.killed = true;
+    ++n_.kills;
+    ++(p.rtpu ? n_.kills_rtpu : n_.kills_host);
+    n_.kills_stopped += was_stopped;
+    n_.kills_starting += was_starting;
 }
 
 // A survivor (up, not stopped) must finish an operation at least every
@@ -167,19 +200,21 @@ void Driver::watch_stalls() {
         if (p.state == Proc::Stopped) stopped = p.name();
     for (Proc& p : procs_) {
         if (p.state != Proc::Up) continue;
-        const soak_worker_t& w = led_->w[p.id];
+        for (unsigned id : p.ids) {
+        const soak_worker_t& w = led_->w[id];
         const uint64_t hb = __atomic_load_n(&w.hb_ns, __ATOMIC_SEQ_CST);
         const uint64_t from = hb > p.floor ? hb : p.floor;
         if (now <= from) continue;
         const uint64_t gap = now - from;
         ++n_.stall_samples;
-        if (gap > worst_per_worker_[p.id]) worst_per_worker_[p.id] = gap;
-        if (gap > worst_.ns) worst_ = {gap, p.id, w.op, stopped};
-        if (gap > bound_ns_ && p.stall_reported != from) {  // each stall once
-            p.stall_reported = from;
-            failure(p.name() + " stalled " + std::to_string(gap / 1000000u) + " ms (bound " +
+        if (gap > worst_per_worker_[id]) worst_per_worker_[id] = gap;
+        if (gap > worst_.ns) worst_ = {gap, id, w.op, stopped};
+        if (gap > bound_ns_ && stall_reported_[id] != from) {  // each stall once
+            stall_reported_[id] = from;
+            failure("worker " + std::to_string(id) + " of " + p.name() + " stalled " + std::to_string(gap / 1000000u) + " ms (bound " +
                     std::to_string(bound_ns_ / 1000000u) + " ms) in operation " + op_name(w.op) +
                     (stopped.empty() ? "" : ", " + stopped + " stopped"));
+        }
         }
     }
 }

@@ -30,6 +30,18 @@ void Driver::finish() {
     check_file_and_leftovers();
 }
 
+// Interrupted (a signal to the driver, a test's timeout): kill and reap
+// every worker, leave, remove the directory; nothing is checked.
+void Driver::abandon() {
+    for (Proc& p : procs_) {
+        int st = 0;
+        if (p.pid > 0 && kill(p.pid, SIGKILL) == 0) reap(p, 5000, &st);
+    }
+    (void)!chm_bp_leave();
+    chm::test::remove_private_dir(dir_);
+    failure("interrupted by a signal: workers killed, " + dir_ + " removed, nothing checked");
+}
+
 // Continue the stopped, restart the dead, then tell every worker to quit
 // after its operation under way (each gives back what it holds), let the
 // hosts leave and stop the RTPUs with SIGTERM. Every wait is bounded.
@@ -48,10 +60,13 @@ void Driver::quiesce() {
     const uint64_t done_by = now_ns() + 10000000000ull;
     for (Proc& p : procs_) {
         if (p.state != Proc::Up) continue;
-        const soak_worker_t& w = led_->w[p.id];
-        while (__atomic_load_n(&w.done, __ATOMIC_SEQ_CST) != w.inc && now_ns() < done_by) nap_ms(5);
-        if (w.done != w.inc) failure(p.name() + " did not finish its operation within 10 s of quit (" +
-                                     op_name(w.op) + ")");
+        for (unsigned id : p.ids) {
+            const soak_worker_t& w = led_->w[id];
+            while (__atomic_load_n(&w.done, __ATOMIC_SEQ_CST) != w.inc && now_ns() < done_by) nap_ms(5);
+            if (w.done != w.inc)
+                failure("worker " + std::to_string(id) + " of " + p.name() +
+                        " did not finish its operation within 10 s of quit (" + op_name(w.op) + ")");
+        }
     }
     for (Proc& p : procs_)
         if (p.pid > 0 && p.rtpu) kill(p.pid, SIGTERM);

@@ -23,6 +23,8 @@
 
 namespace soak {
 
+volatile int g_interrupted = 0;
+
 void Driver::failure(const std::string& what) {
     failures_.push_back(what);
     std::fprintf(stderr, "soak: FAILED: %s\n", what.c_str());
@@ -56,9 +58,9 @@ bool make_ledger(const std::string& path, unsigned workers, unsigned units, soak
 int Driver::run() {
     if (!opt_.seed) opt_.seed = (now_ns() ^ uint64_t(getpid()) << 32) % 1000000007u + 1;
     rng_ = opt_.seed * 0x9E3779B97F4A7C15ull | 1u;
-    const unsigned workers = opt_.rtpus + opt_.hosts;
+    const unsigned workers = 2 * opt_.rtpus + opt_.hosts;  // two tasks per RTPU
     bound_ns_ = (uint64_t(opt_.stop_max_ms) + SOAK_OP_TIMEOUT_NS / 1000000u + opt_.slack_ms) * 1000000u;
-    std::printf("soak: seed %llu, %u s, %u RTPUs + %u host processes, stall bound %llu ms "
+    std::printf("soak: seed %llu, %u s, %u RTPUs (two worker tasks each) + %u host processes, stall bound %llu ms "
                 "(longest stop %u + operation bound %llu + slack %u)\n",
                 (unsigned long long)opt_.seed, opt_.seconds, opt_.rtpus, opt_.hosts,
                 (unsigned long long)(bound_ns_ / 1000000u), opt_.stop_max_ms,
@@ -103,15 +105,26 @@ int Driver::run() {
     }
     doubt_.resize(workers);
     worst_per_worker_.assign(workers, 0);
-    for (unsigned i = 0; i < workers; ++i) {
+    stall_reported_.assign(workers, 0);
+    // Workers 0..R-1: RTPUs' first tasks; R..R+H-1: hosts; then the RTPUs'
+    // second tasks.
+    for (unsigned i = 0; i < opt_.rtpus + opt_.hosts; ++i) {
         Proc p;
         p.id = i;
-        p.rtpu = i < opt_.rtpus ? int(i) + 1 : 0;
+        p.ids = {i};
+        if (i < opt_.rtpus) {
+            p.rtpu = int(i) + 1;
+            p.ids.push_back(opt_.rtpus + opt_.hosts + i);
+        }
         procs_.push_back(p);
     }
     t0_ = now_ns();
     for (Proc& p : procs_) start(p);
     chaos_phase();
+    if (g_interrupted) {
+        abandon();
+        return 1;
+    }
     finish();
 
     uint64_t ops = 0;
@@ -121,10 +134,11 @@ int Driver::run() {
     for (unsigned i = 0; i < workers; ++i)
         per += (i ? ", " : "") + std::to_string(worst_per_worker_[i] / 1000000u);
     std::printf("soak: summary (seed %llu, %u s)\n", (unsigned long long)opt_.seed, opt_.seconds);
-    std::printf("  kills %llu (RTPUs %llu, hosts %llu, of them while stopped %llu), SIGTERM stops %llu, "
-                "SIGSTOP/SIGCONT %llu, restarts %llu\n",
+    std::printf("  kills %llu (RTPUs %llu, hosts %llu; of them while stopped %llu, while starting %llu), "
+                "SIGTERM stops %llu, SIGSTOP/SIGCONT %llu (while starting %llu), restarts %llu\n",
                 (unsigned long long)n_.kills, (unsigned long long)n_.kills_rtpu, (unsigned long long)n_.kills_host,
-                (unsigned long long)n_.kills_stopped, (unsigned long long)n_.terms, (unsigned long long)n_.stops,
+                (unsigned long long)n_.kills_stopped, (unsigned long long)n_.kills_starting,
+                (unsigned long long)n_.terms, (unsigned long long)n_.stops, (unsigned long long)n_.stops_starting,
                 (unsigned long long)n_.restarts);
     std::printf("  operations %llu\n", (unsigned long long)ops);
     for (const auto& [k, v] : report_) std::printf("  %s: %s\n", k.c_str(), v.c_str());
@@ -180,7 +194,7 @@ int main(int argc, char** argv) {
         ++i;
         if (a == "--seconds") o.seconds = unsigned(number("--seconds", v, 1, 86400));
         else if (a == "--seed") o.seed = number("--seed", v, 0, ~0ull >> 1);
-        else if (a == "--rtpus") o.rtpus = unsigned(number("--rtpus", v, 1, 6));
+        else if (a == "--rtpus") o.rtpus = unsigned(number("--rtpus", v, 1, 4));
         else if (a == "--hosts") o.hosts = unsigned(number("--hosts", v, 0, 2));
         else if (a == "--rtpu-bin") o.rtpu_bin = v;
         else if (a == "--host-bin") o.host_bin = v;
@@ -188,9 +202,13 @@ int main(int argc, char** argv) {
         else if (a == "--bpcheck") o.bpcheck_bin = v;
         else usage(("unknown option " + a).c_str());
     }
-    if (o.rtpus + o.hosts > SOAK_MAX_WORKERS) usage("more than 8 workers");
+    if (2 * o.rtpus + o.hosts > SOAK_MAX_WORKERS) usage("more than 8 workers (two per RTPU, one per host)");
     if (o.rtpu_bin.empty() || o.host_bin.empty() || o.worker_so.empty() || o.bpcheck_bin.empty())
         usage("--rtpu-bin, --host-bin, --worker and --bpcheck are required");
     signal(SIGPIPE, SIG_IGN);
+    struct sigaction sa{};
+    sa.sa_handler = [](int) { soak::g_interrupted = 1; };
+    sigemptyset(&sa.sa_mask);
+    for (int sig : {SIGINT, SIGTERM, SIGHUP}) sigaction(sig, &sa, nullptr);
     return soak::Driver(o).run();
 }

@@ -10,6 +10,7 @@
 #include <dirent.h>
 #include <fcntl.h>
 #include <signal.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -30,26 +31,31 @@ void nap_ms(unsigned ms) {
 }
 
 std::string Proc::name() const {
-    return rtpu ? "RTPU " + std::to_string(rtpu) + " (worker " + std::to_string(id) + ")"
-                : "host worker " + std::to_string(id);
+    std::string w;
+    for (unsigned i : ids) w += (w.empty() ? "" : ", ") + std::to_string(i);
+    return rtpu ? "RTPU " + std::to_string(rtpu) + " (workers " + w + ")" : "host worker " + w;
 }
 
 // Fork and exec the next incarnation of `p`; output appended to its log.
 void Driver::start(Proc& p) {
-    soak_worker_t& w = led_->w[p.id];
-    const uint32_t inc = w.inc + 1;
-    __atomic_store_n(&w.inc, inc, __ATOMIC_SEQ_CST);
+    // Every worker of the process takes the same next incarnation.
+    const uint32_t inc = led_->w[p.id].inc + 1;
+    for (unsigned i : p.ids) __atomic_store_n(&led_->w[i].inc, inc, __ATOMIC_SEQ_CST);
     const std::string id = std::to_string(p.id), incs = std::to_string(inc), seed = std::to_string(opt_.seed);
     std::vector<std::string> args;
-    if (p.rtpu)
+    if (p.rtpu) {
         args = {opt_.rtpu_bin, "--backplane", bp_, "--rtpu", std::to_string(p.rtpu), "--name",
-                "soak" + std::to_string(p.rtpu), "--stdio-log", opt_.worker_so, ledger_path_, id, incs, seed};
-    else
+                "soak" + std::to_string(p.rtpu), "--stdio-log", opt_.worker_so, ledger_path_, incs, seed};
+        for (unsigned i : p.ids) args.push_back(std::to_string(i));
+    } else
         args = {opt_.host_bin, bp_, ledger_path_, id, incs, seed};
     const std::string log = dir_ + "/worker" + id + ".log";
     std::fflush(nullptr);
+    const pid_t parent = getpid();
     const pid_t pid = fork();
     if (pid == 0) {
+        prctl(PR_SET_PDEATHSIG, SIGKILL);  // a driver killed outright takes its workers with it
+        if (getppid() != parent) _exit(127);  // it died before the line above
         const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0600);
         if (fd >= 0) {
             dup2(fd, 1);
@@ -90,8 +96,12 @@ bool Driver::reap(Proc& p, int timeout_ms, int* status) {
 // `p` is gone (reaped): take over what its incarnation left in flight.
 // Only here, with the process certainly dead, are its ledger states final.
 void Driver::absorb_death(Proc& p) {
-    soak_worker_t& w = led_->w[p.id];
-    if (w.send_state == SOAK_SEND_PENDING) doubt_[p.id].insert(w.last_seq);  // sent or not: both are right
+    for (unsigned i : p.ids) absorb_worker(p, i);
+}
+
+void Driver::absorb_worker(const Proc& p, unsigned id) {
+    soak_worker_t& w = led_->w[id];
+    if (w.send_state == SOAK_SEND_PENDING) doubt_[id].insert(w.last_seq);  // sent or not: both are right
     w.send_state = SOAK_SEND_IDLE;
     if (w.rbuf.magic == SOAK_MSG_MAGIC) {
         // A receive copied this message and the worker died before it

@@ -36,24 +36,26 @@ struct Options {
     bool quiet = false;
 };
 
-// One worker: an RTPU process running worker.c as a task, or a host process.
+// A worker process: an RTPU running worker.c in two tasks, or a host process
+// running it once.
 struct Proc {
     enum State { Down, Starting, Up, Stopped, Terminating };
-    unsigned id = 0;
+    unsigned id = 0;              // its first worker (and its log's name)
+    std::vector<unsigned> ids;    // every worker it runs: an RTPU runs two tasks
     int rtpu = 0;         // RTPU number (1..), 0 for a host
     pid_t pid = -1;
     State state = Down;
+    State resume = Up;    // Stopped: the state SIGCONT returns it to (Up or Starting)
     uint64_t since = 0;   // when it entered `state`
     uint64_t floor = 0;   // heartbeats before this do not count (start, SIGCONT)
     uint64_t due = 0;     // Down: restart time; Stopped: SIGCONT time
     bool killed = false;  // we sent SIGKILL or SIGTERM: its end is expected
-    uint64_t stall_reported = 0;  // the heartbeat whose overlong gap was reported
     std::string name() const;
 };
 
 struct Counts {
-    uint64_t kills = 0, kills_rtpu = 0, kills_host = 0, kills_stopped = 0;
-    uint64_t terms = 0, stops = 0, restarts = 0, actions = 0;
+    uint64_t kills = 0, kills_rtpu = 0, kills_host = 0, kills_stopped = 0, kills_starting = 0;
+    uint64_t terms = 0, stops = 0, stops_starting = 0, restarts = 0, actions = 0;
     uint64_t units_returned = 0, sem_doubt = 0, shm_doubt = 0, dead_bufs_partial = 0;
     uint64_t stall_samples = 0;
 };
@@ -75,17 +77,23 @@ public:
     void start(Proc& p);
     bool reap(Proc& p, int timeout_ms, int* status);
     void absorb_death(Proc& p);
+    void absorb_worker(const Proc& p, unsigned id);
     std::vector<pid_t> leftover_processes() const;
 
     // chaos.cpp
     void chaos_phase();
     void tick(bool chaos);
     void act();
+    void strike(Proc& p);
+    void do_stop(Proc& p);
+    void do_kill(Proc& p);
     void watch_stalls();
+    bool all_started(const Proc& p) const;
     void watch_objects();
 
     // finish.cpp
     void finish();
+    void abandon();
     void quiesce();
     void drain_and_account();
     void check_sem_and_shm();
@@ -112,6 +120,7 @@ public:
     unsigned worst_obj_ = 0;
     uint64_t obj_reported_[SOAK_OBJECTS] = {};
     std::vector<uint64_t> worst_per_worker_;
+    std::vector<uint64_t> stall_reported_;   // per worker: the heartbeat whose overlong gap was reported
     std::vector<std::set<uint32_t>> doubt_;  // per sender: sequences whose send a death left in doubt
     std::vector<soak_msg_t> dead_bufs_;      // complete messages found in dead receivers' buffers
     std::vector<std::string> failures_;
@@ -119,6 +128,7 @@ public:
 };
 
 uint64_t now_ns();
+extern volatile int g_interrupted;  // SIGINT, SIGTERM or SIGHUP arrived: clean up and fail
 inline const char* op_name(uint32_t op) {
     static const char* const names[SOAK_OP_COUNT] = {"none", "send", "receive", "P/V", "shm write", "shm read", "pause"};
     return op < SOAK_OP_COUNT ? names[op] : "?";
