@@ -186,7 +186,13 @@ static void do_shm_write(ctx_t* c) {
     }
     const uint64_t v = LD(s->word[0]) + 1u;
     ST(s->seq, LD(s->seq) + 1u); /* odd: writing */
-    for (int i = 0; i < SOAK_SHM_WORDS; ++i) ST(s->word[i], v);
+    const uint64_t linger = rnd(c) % 2 ? rnd(c) % 1000 : 0;
+    for (int i = 0; i < SOAK_SHM_WORDS; ++i) {
+        ST(s->word[i], v);
+        /* Half the writes linger halfway (up to 1 ms), so deaths and stops
+         * land inside the lock and mid-write, not only between calls. */
+        if (i == SOAK_SHM_WORDS / 2 - 1 && linger) nap_us(linger);
+    }
     ST(s->seq, LD(s->seq) + 1u);
     ++me->shm_writes;
     progress(c, SOAK_OBJ_SHM);
