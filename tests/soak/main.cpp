@@ -209,6 +209,10 @@ int main(int argc, char** argv) {
     struct sigaction sa{};
     sa.sa_handler = [](int) { soak::g_interrupted = 1; };
     sigemptyset(&sa.sa_mask);
-    for (int sig : {SIGINT, SIGTERM, SIGHUP}) sigaction(sig, &sa, nullptr);
+    for (int sig : {SIGINT, SIGTERM, SIGHUP}) {
+        struct sigaction old{};
+        sigaction(sig, nullptr, &old);
+        if (old.sa_handler != SIG_IGN) sigaction(sig, &sa, nullptr);  // nohup's ignored SIGHUP stays ignored
+    }
     return soak::Driver(o).run();
 }
