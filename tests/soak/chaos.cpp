@@ -221,7 +221,8 @@ void Driver::watch_stalls() {
 
 namespace {
 const char* object_name(unsigned k) {
-    static const char* const names[SOAK_OBJECTS] = {"soak.q0", "soak.q1", "soak.q2", "soak.sem", "soak.shm"};
+    static const char* const names[SOAK_OBJECTS] = {"soak.q0", "soak.q1", "soak.q2", "soak.sem", "soak.shm",
+                                                        "express mail"};
     return names[k];
 }
 }  // namespace

@@ -128,7 +128,7 @@ void Driver::drain_and_account() {
         }
     }
     uint64_t sent = 0, received = 0, lost = 0, phantom = 0, doubt = 0, doubt_arrived = 0, dups = driver_dups;
-    uint64_t torn = 0, bad_w = bad, errors = 0, pv = 0;
+    uint64_t torn = 0, bad_w = bad, errors = 0, pv = 0, ping_ok = 0, ping_down = 0, ping_late = 0;
     std::string first_lost, first_phantom;
     for (unsigned s = 0; s < led_->workers; ++s) {
         const soak_worker_t& w = led_->w[s];
@@ -137,6 +137,9 @@ void Driver::drain_and_account() {
         bad_w += w.bad_msgs;
         errors += w.errors;
         pv += w.p_ok;
+        ping_ok += w.pings_ok;
+        ping_down += w.pings_down;
+        ping_late += w.pings_late;
         if (w.errors)
             failure("worker " + num(s) + ": " + num(w.errors) + " unexpected statuses, the last " +
                     std::to_string(w.last_err) + " in operation " + op_name(w.last_err_op));
@@ -171,6 +174,8 @@ void Driver::drain_and_account() {
     report_["messages_phantom"] = num(phantom);
     report_["messages_duplicated"] = num(dups);
     report_["pv_cycles"] = num(pv);
+    report_["pings"] = num(ping_ok) + " answered, " + num(ping_down) + " target down, " + num(ping_late) +
+                       " target late (stopped)";
     report_["unexpected_statuses"] = num(errors);
 }
 

@@ -22,15 +22,17 @@
 #define SOAK_PAD_MAX (SOAK_MSG_MAX - 24)
 #define SOAK_OP_TIMEOUT_NS 200000000ull /* every blocking call: 200 ms */
 #define SOAK_SHM_WORDS 8
-/* Objects whose progress the driver watches: the queues, then these two. */
+/* Objects whose progress the driver watches: the queues, then these
+ * (MAIL: some RTPU answered an express-mail ping). */
 #define SOAK_OBJ_SEM SOAK_QUEUES
 #define SOAK_OBJ_SHM (SOAK_QUEUES + 1)
-#define SOAK_OBJECTS (SOAK_QUEUES + 2)
+#define SOAK_OBJ_MAIL (SOAK_QUEUES + 2)
+#define SOAK_OBJECTS (SOAK_QUEUES + 3)
 
 /* What a worker was doing (op) and the in-flight states the driver reads
  * after a death. */
 enum soak_op { SOAK_OP_IDLE, SOAK_OP_SEND, SOAK_OP_RECV, SOAK_OP_PV, SOAK_OP_SHM_WRITE, SOAK_OP_SHM_READ,
-               SOAK_OP_PAUSE, SOAK_OP_COUNT };
+               SOAK_OP_PAUSE, SOAK_OP_PING, SOAK_OP_COUNT };
 enum soak_send_state { SOAK_SEND_IDLE, SOAK_SEND_PENDING };   /* pending: seq last_seq in the call */
 enum soak_sem_state { SOAK_SEM_IDLE, SOAK_SEM_P, SOAK_SEM_HELD, SOAK_SEM_V };
 enum soak_shm_state { SOAK_SHM_IDLE, SOAK_SHM_LOCKING, SOAK_SHM_WRITING, SOAK_SHM_UNLOCKING };
@@ -55,6 +57,7 @@ typedef struct soak_worker {
     uint64_t op_count[SOAK_OP_COUNT]; /* completed, by kind */
     uint64_t sends_ok, send_timeouts, recvs_ok, recv_timeouts;
     uint64_t p_ok, p_timeouts, shm_writes, shm_reads, shm_busy;
+    uint64_t pings_ok, pings_down, pings_late; /* answered; -EHOSTDOWN; -ETIMEDOUT or -EBUSY */
     uint64_t owner_dead, repairs;     /* spin-lock taken from a dead holder; seqlock repaired */
     uint64_t dups, torn, bad_msgs;    /* defects seen by this worker */
     uint64_t errors;                  /* unexpected statuses */
@@ -66,7 +69,7 @@ typedef struct soak_worker {
 typedef struct soak_ledger {
     uint32_t magic, workers;
     uint32_t sem_units; /* soak.sem's initial count */
-    uint32_t reserved;
+    uint32_t rtpus;     /* RTPUs 1..rtpus, the targets of pings */
     uint64_t ok_ns[SOAK_OBJECTS]; /* CLOCK_MONOTONIC of each object's last successful operation */
     soak_worker_t w[SOAK_MAX_WORKERS];
 } soak_ledger_t;

@@ -39,7 +39,7 @@ uint64_t Driver::rnd() {  // xorshift64*: the whole run follows from the seed
 
 namespace {
 
-bool make_ledger(const std::string& path, unsigned workers, unsigned units, soak_ledger_t** out) {
+bool make_ledger(const std::string& path, unsigned workers, unsigned rtpus, unsigned units, soak_ledger_t** out) {
     const int fd = open(path.c_str(), O_RDWR | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
     if (fd < 0 || ftruncate(fd, off_t(SOAK_LEDGER_SIZE)) != 0) return false;
     void* m = mmap(nullptr, SOAK_LEDGER_SIZE, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
@@ -49,6 +49,7 @@ bool make_ledger(const std::string& path, unsigned workers, unsigned units, soak
     l->magic = SOAK_MSG_MAGIC;
     l->workers = workers;
     l->sem_units = units;
+    l->rtpus = rtpus;
     *out = l;
     return true;
 }
@@ -78,7 +79,7 @@ int Driver::run() {
     c.common_size = 512 * 1024;
     c.registry_capacity = 32;
     if (chm_bp_create(bp_.c_str(), &c) != 0 || chm_bp_attach_host(bp_.c_str(), "soak-driver", nullptr) != 0 ||
-        !make_ledger(ledger_path_, workers, opt_.sem_units, &led_)) {
+        !make_ledger(ledger_path_, workers, opt_.rtpus, opt_.sem_units, &led_)) {
         std::fprintf(stderr, "soak: setting up %s: %s %s\n", dir_.c_str(), chm_bp_last_error(), std::strerror(errno));
         (void)!chm_bp_leave();  // a failed setup: nothing to check
         chm::test::remove_private_dir(dir_);
@@ -148,7 +149,8 @@ int Driver::run() {
                 worst_.peer_stopped.empty() ? "" : (worst_.peer_stopped + " was stopped").c_str(),
                 (unsigned long long)(bound_ns_ / 1000000u), per.c_str(), (unsigned long long)n_.stall_samples,
                 worst_tick_gap_ / 1e6);
-    static const char* const objects[SOAK_OBJECTS] = {"soak.q0", "soak.q1", "soak.q2", "soak.sem", "soak.shm"};
+    static const char* const objects[SOAK_OBJECTS] = {"soak.q0", "soak.q1", "soak.q2", "soak.sem", "soak.shm",
+                                                        "express mail"};
     std::printf("  longest time an object served nobody: %.1f ms (%s; bound %llu ms)\n", worst_obj_ns_ / 1e6,
                 objects[worst_obj_], (unsigned long long)(bound_ns_ / 1000000u));
     std::printf("soak: %s (%zu failed checks)\n", failures_.empty() ? "PASSED" : "FAILED", failures_.size());

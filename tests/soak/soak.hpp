@@ -130,7 +130,8 @@ public:
 uint64_t now_ns();
 extern volatile int g_interrupted;  // SIGINT, SIGTERM or SIGHUP arrived: clean up and fail
 inline const char* op_name(uint32_t op) {
-    static const char* const names[SOAK_OP_COUNT] = {"none", "send", "receive", "P/V", "shm write", "shm read", "pause"};
+    static const char* const names[SOAK_OP_COUNT] = {"none",     "send",     "receive", "P/V",
+                                                     "shm write", "shm read", "pause",   "ping"};
     return op < SOAK_OP_COUNT ? names[op] : "?";
 }
 void nap_ms(unsigned ms);

@@ -8,6 +8,7 @@
 #include "worker.h"
 
 #include <chimera/msgq.h>
+#include <chimera/rtpu.h>
 #include <chimera/rsem.h>
 #include <chimera/shm.h>
 #include <chimera/spin.h>
@@ -226,6 +227,26 @@ static void do_shm_read(ctx_t* c) {
     ++c->me->shm_busy; /* odd for the whole bound: its writer stopped or died */
 }
 
+/* Express mail: ping a random RTPU (perhaps its own). A dead or absent
+ * target answers -EHOSTDOWN, a stopped one lets the call time out, and a
+ * stopped target's ring may stay full of abandoned requests (-EBUSY). */
+static void do_ping(ctx_t* c) {
+    soak_worker_t* me = c->me;
+    chm_rtpu_info_t info;
+    const int target = 1 + (int)(rnd(c) % c->l->rtpus);
+    const int r = chm_rtpu_ping(target, &info);
+    if (r == 0) {
+        ++me->pings_ok;
+        progress(c, SOAK_OBJ_MAIL);
+    } else if (r == -EHOSTDOWN) {
+        ++me->pings_down;
+    } else if (r == -ETIMEDOUT || r == -EBUSY) {
+        ++me->pings_late;
+    } else {
+        fail(c, r, SOAK_OP_PING);
+    }
+}
+
 static int open_all(ctx_t* c) {
     char name[32];
     for (int i = 0; i < SOAK_QUEUES; ++i) {
@@ -258,13 +279,15 @@ int soak_worker_run(const char* ledger_path, unsigned id, uint32_t inc, uint64_t
     if (LD(c.me->inc) != inc)
         return fprintf(stderr, "soak worker %u: incarnation %u, the ledger says %u\n", id, inc, c.me->inc), 1;
     if (open_all(&c)) return 1;
+    chm_rtpu_timeout_set(SOAK_OP_TIMEOUT_NS); /* every express-mail call of this process */
     ST(c.me->hb_ns, now_ns());
     ST(c.me->started, inc);
     while (!LD(c.me->quit)) {
         nap_us(rnd(&c) % 200); /* a gap between operations: ~5,000 a second at most */
         const uint64_t k = rnd(&c) % 100;
-        unsigned op = k < 30 ? SOAK_OP_SEND : k < 60 ? SOAK_OP_RECV : k < 75 ? SOAK_OP_PV
-                    : k < 85 ? SOAK_OP_SHM_WRITE : k < 95 ? SOAK_OP_SHM_READ : SOAK_OP_PAUSE;
+        unsigned op = k < 27 ? SOAK_OP_SEND : k < 54 ? SOAK_OP_RECV : k < 68 ? SOAK_OP_PV
+                    : k < 78 ? SOAK_OP_SHM_WRITE : k < 88 ? SOAK_OP_SHM_READ : k < 95 ? SOAK_OP_PING
+                    : SOAK_OP_PAUSE;
         ST(c.me->op, op);
         switch (op) {
         case SOAK_OP_SEND: do_send(&c); break;
@@ -272,6 +295,7 @@ int soak_worker_run(const char* ledger_path, unsigned id, uint32_t inc, uint64_t
         case SOAK_OP_PV: do_pv(&c); break;
         case SOAK_OP_SHM_WRITE: do_shm_write(&c); break;
         case SOAK_OP_SHM_READ: do_shm_read(&c); break;
+        case SOAK_OP_PING: do_ping(&c); break;
         default: nap_us(rnd(&c) % 1000); break;
         }
         ++c.me->op_count[op];

@@ -222,6 +222,20 @@ int pidfd_signal(int pidfd, int sig) {
 #endif
 }
 
+// A refused member whose pid names no live process (exited, or a zombie)
+// died before its slot was recovered: a death, not a forged entry. Nothing
+// is signalled either way; the caller learns the member is gone (-ESRCH,
+// as for a member that left), not a refusal (-EPERM, which express mail
+// returned to the user for a peer killed a moment before, where the API
+// promises -EHOSTDOWN once the slot is recovered), and nothing is written
+// to stderr.
+bool gone(std::uint32_t slot, std::uint32_t pid) {
+    if (proc_start_time(int(pid)) != 0) return false;
+    set_error("backplane %s: RTPU table slot %u: pid %u has exited: not signalled", current() ? current()->path : "?",
+              slot, pid);
+    return true;
+}
+
 int signal_thread(const View& v, int fd, std::uint32_t slot, int sig) {
     const RtpuEntry* e = v.rtpu(slot);
     const std::uint32_t status = e->status.load(std::memory_order_acquire);
@@ -249,11 +263,13 @@ int signal_thread(const View& v, int fd, std::uint32_t slot, int sig) {
             c.seq.store(even + 2, std::memory_order_release);
         }
         if (!ok) {
+            if (gone(slot, pid)) return -ESRCH;
             report(why);  // once per key: later wakes hit the cached refusal
             return -EPERM;
         }
     }
     if (!ok) {
+        if (gone(slot, pid)) return -ESRCH;
         set_error("backplane %s: RTPU table slot %u: pid %u / tid %u refused before: not signalled",
                   current() ? current()->path : "?", slot, pid, tid);
         return -EPERM;
