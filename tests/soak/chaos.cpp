@@ -40,6 +40,18 @@ void Driver::chaos_phase() {
     }
 }
 
+// The last line of a worker's log (chimera-rtpu says there why it stopped).
+std::string Driver::log_tail(const Proc& p) const {
+    std::string last, line;
+    if (FILE* f = std::fopen((dir_ + "/worker" + std::to_string(p.id) + ".log").c_str(), "r")) {
+        char buf[512];
+        while (std::fgets(buf, sizeof buf, f)) last = buf;
+        std::fclose(f);
+    }
+    while (!last.empty() && last.back() == '\n') last.pop_back();
+    return last.empty() ? "(empty)" : last;
+}
+
 bool Driver::all_started(const Proc& p) const {
     for (unsigned i : p.ids)
         if (__atomic_load_n(&led_->w[i].started, __ATOMIC_SEQ_CST) != led_->w[i].inc) return false;
@@ -75,7 +87,7 @@ void Driver::tick(bool chaos) {
                 failure(p.name() + " ended on its own: " +
                         (WIFEXITED(st) ? "exit " + std::to_string(WEXITSTATUS(st))
                                        : std::string("signal ") + strsignal(WTERMSIG(st))) +
-                        " (its log: " + dir_ + "/worker" + std::to_string(p.id) + ".log)");
+                        "; its log ends: " + log_tail(p));
                 absorb_death(p);
                 p.state = Proc::Down;
                 p.due = now + 100000000u;

@@ -142,7 +142,8 @@ void Driver::drain_and_account() {
         ping_late += w.pings_late;
         if (w.errors)
             failure("worker " + num(s) + ": " + num(w.errors) + " unexpected statuses, the last " +
-                    std::to_string(w.last_err) + " in operation " + op_name(w.last_err_op));
+                    std::to_string(w.last_err) + " in operation " + op_name(w.last_err_op) + ": " +
+                    std::string(w.last_err_text, strnlen(w.last_err_text, sizeof w.last_err_text)));
         const uint8_t* sb = soak_sent_bits(led_, s);
         const uint8_t* rb = soak_recv_bits(led_, s);
         for (uint32_t seq = 1; seq <= w.last_seq && seq < SOAK_SEQ_CAP; ++seq) {

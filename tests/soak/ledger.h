@@ -63,6 +63,7 @@ typedef struct soak_worker {
     uint64_t errors;                  /* unexpected statuses */
     int32_t last_err;
     uint32_t last_err_op;
+    char last_err_text[200];          /* chm_bp_last_error() after it */
     soak_msg_t rbuf;                  /* receive buffer: valid while magic is set */
 } soak_worker_t;
 

@@ -56,6 +56,7 @@ void Driver::start(Proc& p) {
     if (pid == 0) {
         prctl(PR_SET_PDEATHSIG, SIGKILL);  // a driver killed outright takes its workers with it
         if (getppid() != parent) _exit(127);  // it died before the line above
+        setsid();  // its own session: a hangup of the driver's terminal or job is not its stop
         const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0600);
         if (fd >= 0) {
             dup2(fd, 1);

@@ -89,6 +89,7 @@ public:
     void do_kill(Proc& p);
     void watch_stalls();
     bool all_started(const Proc& p) const;
+    std::string log_tail(const Proc& p) const;
     void watch_objects();
 
     // finish.cpp

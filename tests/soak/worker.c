@@ -7,6 +7,7 @@
 #define _GNU_SOURCE /* clock_gettime, nanosleep, O_CLOEXEC under -std=c11 */
 #include "worker.h"
 
+#include <chimera/bp.h>
 #include <chimera/msgq.h>
 #include <chimera/rtpu.h>
 #include <chimera/rsem.h>
@@ -69,6 +70,7 @@ static void fail(ctx_t* c, int status, unsigned op) {
     ++c->me->errors;
     c->me->last_err = status;
     c->me->last_err_op = op;
+    snprintf(c->me->last_err_text, sizeof c->me->last_err_text, "%s", chm_bp_last_error());
 }
 
 static void do_send(ctx_t* c) {
