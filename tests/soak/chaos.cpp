@@ -36,8 +36,26 @@ void Driver::chaos_phase() {
                         (unsigned long long)pv, worst_.ns / 1e6);
             std::fflush(stdout);
         }
-        nap_ms(10);
+        nap_witness(10);
     }
+}
+
+// Sleep, and count what the host added to the sleep as its own stall.
+void Driver::nap_witness(unsigned ms) {
+    const uint64_t t = now_ns();
+    nap_ms(ms);
+    const uint64_t slept = now_ns() - t, asked = uint64_t(ms) * 1000000u;
+    if (slept > asked + 1000000u) host_stall_ += slept - asked;  // the usual oversleep is no stall
+}
+
+// The host stall since `from` (a gap's start), remembering per gap where
+// the count stood when it began.
+uint64_t Driver::excused(uint64_t& seen_from, uint64_t& host_at, uint64_t from) const {
+    if (from != seen_from) {
+        seen_from = from;
+        host_at = host_stall_;
+    }
+    return host_stall_ - host_at;
 }
 
 // The last line of a worker's log (chimera-rtpu says there why it stopped).
@@ -217,13 +235,16 @@ void Driver::watch_stalls() {
         const uint64_t hb = __atomic_load_n(&w.hb_ns, __ATOMIC_SEQ_CST);
         const uint64_t from = hb > p.floor ? hb : p.floor;
         if (now <= from) continue;
-        const uint64_t gap = now - from;
+        const uint64_t gap = now - from, host = excused(seen_from_[id], host_at_[id], from);
+        const uint64_t net = gap > host ? gap - host : 0;
         ++n_.stall_samples;
         if (gap > worst_per_worker_[id]) worst_per_worker_[id] = gap;
         if (gap > worst_.ns) worst_ = {gap, id, w.op, stopped};
-        if (gap > bound_ns_ && stall_reported_[id] != from) {  // each stall once
+        if (net > worst_net_) worst_net_ = net;
+        if (net > bound_ns_ && stall_reported_[id] != from) {  // each stall once
             stall_reported_[id] = from;
-            failure("worker " + std::to_string(id) + " of " + p.name() + " stalled " + std::to_string(gap / 1000000u) + " ms (bound " +
+            failure("worker " + std::to_string(id) + " of " + p.name() + " stalled " + std::to_string(gap / 1000000u) +
+                    " ms, " + std::to_string(net / 1000000u) + " beyond the host's own stalls (bound " +
                     std::to_string(bound_ns_ / 1000000u) + " ms) in operation " + op_name(w.op) +
                     (stopped.empty() ? "" : ", " + stopped + " stopped"));
         }
@@ -254,15 +275,15 @@ void Driver::watch_objects() {
         const uint64_t ok = __atomic_load_n(&led_->ok_ns[k], __ATOMIC_SEQ_CST);
         const uint64_t from = ok > obj_floor_ ? ok : obj_floor_;
         if (now <= from) continue;
-        const uint64_t gap = now - from;
+        const uint64_t gap = now - from, host = excused(obj_seen_from_[k], obj_host_at_[k], from);
         if (gap > worst_obj_ns_) {
             worst_obj_ns_ = gap;
             worst_obj_ = k;
         }
-        if (gap > bound_ns_ && obj_reported_[k] != from) {
+        if (gap - (gap > host ? host : gap) > bound_ns_ && obj_reported_[k] != from) {
             obj_reported_[k] = from;
             failure(std::string(object_name(k)) + " served nobody for " + std::to_string(gap / 1000000u) +
-                    " ms (bound " + std::to_string(bound_ns_ / 1000000u) + " ms)");
+                    " ms, the host itself stalled " + std::to_string(host / 1000000u) + " ms of it (bound " + std::to_string(bound_ns_ / 1000000u) + " ms)");
         }
     }
 }

@@ -49,7 +49,7 @@ void Driver::quiesce() {
     const uint64_t up_by = now_ns() + 30000000000ull;
     for (Proc& p : procs_)
         if (p.state == Proc::Stopped) p.due = 0;
-    for (bool all_up = false; !all_up && now_ns() < up_by; nap_ms(10)) {
+    for (bool all_up = false; !all_up && now_ns() < up_by; nap_witness(10)) {
         tick(false);
         all_up = true;
         for (const Proc& p : procs_) all_up &= p.state == Proc::Up;

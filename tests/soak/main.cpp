@@ -107,6 +107,8 @@ int Driver::run() {
     doubt_.resize(workers);
     worst_per_worker_.assign(workers, 0);
     stall_reported_.assign(workers, 0);
+    seen_from_.assign(workers, 0);
+    host_at_.assign(workers, 0);
     // Workers 0..R-1: RTPUs' first tasks; R..R+H-1: hosts; then the RTPUs'
     // second tasks.
     for (unsigned i = 0; i < opt_.rtpus + opt_.hosts; ++i) {
@@ -144,11 +146,12 @@ int Driver::run() {
     std::printf("  operations %llu\n", (unsigned long long)ops);
     for (const auto& [k, v] : report_) std::printf("  %s: %s\n", k.c_str(), v.c_str());
     std::printf("  worst survivor stall %.1f ms (worker %u, operation %s%s%s; bound %llu ms); per worker [%s] ms; "
-                "%llu samples; driver's longest tick %.1f ms\n",
+                "%llu samples; driver's longest tick %.1f ms\n"
+                "  worst stall beyond the host's own stalls %.1f ms; the host stalled the driver %.1f ms in all\n",
                 worst_.ns / 1e6, worst_.worker, op_name(worst_.op), worst_.peer_stopped.empty() ? "" : ", while ",
                 worst_.peer_stopped.empty() ? "" : (worst_.peer_stopped + " was stopped").c_str(),
                 (unsigned long long)(bound_ns_ / 1000000u), per.c_str(), (unsigned long long)n_.stall_samples,
-                worst_tick_gap_ / 1e6);
+                worst_tick_gap_ / 1e6, worst_net_ / 1e6, host_stall_ / 1e6);
     static const char* const objects[SOAK_OBJECTS] = {"soak.q0", "soak.q1", "soak.q2", "soak.sem", "soak.shm",
                                                         "express mail"};
     std::printf("  longest time an object served nobody: %.1f ms (%s; bound %llu ms)\n", worst_obj_ns_ / 1e6,

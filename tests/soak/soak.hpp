@@ -88,6 +88,8 @@ public:
     void do_stop(Proc& p);
     void do_kill(Proc& p);
     void watch_stalls();
+    void nap_witness(unsigned ms);
+    uint64_t excused(uint64_t& seen_from, uint64_t& host_at, uint64_t from) const;
     bool all_started(const Proc& p) const;
     std::string log_tail(const Proc& p) const;
     void watch_objects();
@@ -122,6 +124,12 @@ public:
     uint64_t obj_reported_[SOAK_OBJECTS] = {};
     std::vector<uint64_t> worst_per_worker_;
     std::vector<uint64_t> stall_reported_;   // per worker: the heartbeat whose overlong gap was reported
+    // The host's own stalls, as the driver's naps overslept them (a
+    // witness that makes no backplane call): a survivor's gap counts
+    // against the bound less the host stall that fell inside it.
+    uint64_t host_stall_ = 0, worst_net_ = 0;
+    std::vector<uint64_t> seen_from_, host_at_;                       // per worker
+    uint64_t obj_seen_from_[SOAK_OBJECTS] = {}, obj_host_at_[SOAK_OBJECTS] = {};
     std::vector<std::set<uint32_t>> doubt_;  // per sender: sequences whose send a death left in doubt
     std::vector<soak_msg_t> dead_bufs_;      // complete messages found in dead receivers' buffers
     std::vector<std::string> failures_;
