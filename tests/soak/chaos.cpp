@@ -241,7 +241,10 @@ void Driver::watch_stalls() {
         if (gap > worst_per_worker_[id]) worst_per_worker_[id] = gap;
         if (gap > worst_.ns) worst_ = {gap, id, w.op, stopped};
         if (net > worst_net_) worst_net_ = net;
-        if (net > bound_ns_ && stall_reported_[id] != from) {  // each stall once
+        // Only a gap spent inside a backplane call can be the runtime's: one
+        // between calls (its op none or a pause) is the host not running it.
+        const bool in_call = w.op != SOAK_OP_IDLE && w.op != SOAK_OP_PAUSE;
+        if (in_call && net > bound_ns_ && stall_reported_[id] != from) {  // each stall once
             stall_reported_[id] = from;
             failure("worker " + std::to_string(id) + " of " + p.name() + " stalled " + std::to_string(gap / 1000000u) +
                     " ms, " + std::to_string(net / 1000000u) + " beyond the host's own stalls (bound " +
@@ -271,9 +274,14 @@ void Driver::watch_objects() {
             if (p.state != Proc::Up) return;
         obj_floor_ = now;
     }
+    // Express mail needs an RTPU up: none may be (two down, one stopped).
+    bool rtpu_up = false;
+    for (const Proc& p : procs_) rtpu_up |= p.rtpu && p.state == Proc::Up;
+    if (!rtpu_up) mail_floor_ = now;
     for (unsigned k = 0; k < SOAK_OBJECTS; ++k) {
         const uint64_t ok = __atomic_load_n(&led_->ok_ns[k], __ATOMIC_SEQ_CST);
-        const uint64_t from = ok > obj_floor_ ? ok : obj_floor_;
+        const uint64_t floor = k == SOAK_OBJ_MAIL && mail_floor_ > obj_floor_ ? mail_floor_ : obj_floor_;
+        const uint64_t from = ok > floor ? ok : floor;
         if (now <= from) continue;
         const uint64_t gap = now - from, host = excused(obj_seen_from_[k], obj_host_at_[k], from);
         if (gap > worst_obj_ns_) {

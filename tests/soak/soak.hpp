@@ -119,7 +119,7 @@ public:
     Stall worst_;
     // Objects (SOAK_OBJ_*): each must do its job (a message in or out, a
     // P, a write) within the bound, from the moment every worker was first up.
-    uint64_t obj_floor_ = 0, worst_obj_ns_ = 0;
+    uint64_t obj_floor_ = 0, worst_obj_ns_ = 0, mail_floor_ = 0;
     unsigned worst_obj_ = 0;
     uint64_t obj_reported_[SOAK_OBJECTS] = {};
     std::vector<uint64_t> worst_per_worker_;
