@@ -14,6 +14,8 @@ ASAN_SUITES = kernel port ipc svar servo config matrix devices errors host
 # and processes (tests/ipc/meson.build says which cases it leaves out, why).
 TSAN_SUITES = ipc host
 FUZZ_SECONDS ?= 300
+SOAK_SECONDS ?= 600
+SOAK_SEED   ?= 0
 MESON_TEST  ?= meson test --print-errorlogs --num-processes 2
 
 PKGS_BUILD = meson ninja-build g++ pkg-config python3 libgtest-dev libgmock-dev \
@@ -26,7 +28,7 @@ PKGS_BENCH = libbenchmark-dev rt-tests python3-matplotlib
 PKGS_FUZZ  = clang libclang-rt-14-dev
 FUZZ_TARGETS = fuzz_backplane fuzz_msgq fuzz_xmail fuzz_args fuzz_config fuzz_servo fuzz_cmdi fuzz_host
 
-.PHONY: all deps deps-cross deps-bench deps-fuzz build demo demo-loop demo-multi stress test test-native test-m68k \
+.PHONY: all deps deps-cross deps-bench deps-fuzz build demo demo-loop demo-multi stress soak test test-native test-m68k \
         test-aarch64 test-fuzz test-asan test-tsan fuzz fuzz-seeds bench clean
 
 all: build
@@ -107,6 +109,17 @@ stress: deps $(BUILD)/build.ninja
 	CHM_KILL_REPEATS=2000 CHM_FAULT_REPEATS=2000 $(MESON_TEST) -C $(BUILD) --timeout-multiplier 30 \
 	    ipc_recovery ipc_msgq_robust ipc_fault
 	CHM_DIFF_SEED=0 CHM_DIFF_SETS=20000 $(BUILD)/tests/kernel/test_kernel_sched_diff --gtest_filter='Policies/*'
+
+# The chaos soak (tests/soak, docs/backplane.md "Chaos soak"): 3 RTPUs and
+# 2 host processes exchanging messages, semaphore units, a seqlock block
+# and express mail on a private backplane while they are killed, stopped/continued,
+# terminated and restarted at random for SOAK_SECONDS (600); then the
+# accounting, the checker and a search for anything left. SOAK_SEED=0 takes
+# a seed from the clock; the seed is printed, and the same seed replays the
+# same sequence of actions (their timing follows the machine).
+soak: deps $(BUILD)/build.ninja
+	meson compile -C $(BUILD) chimera-soak chimera-soak-host soak_worker chimera-rtpu chimera-bpcheck
+	$(BUILD)/tests/soak/chimera-soak --seconds $(SOAK_SECONDS) --seed $(SOAK_SEED)
 
 test-native: deps deps-bench $(BUILD)/build.ninja
 	meson compile -C $(BUILD)

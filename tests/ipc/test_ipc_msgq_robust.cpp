@@ -64,7 +64,20 @@ std::vector<std::uint32_t> drain(chm_msgq_t* q) {
     std::uint32_t v;
     if (chm_msgq_receive_timed(q, &v, sizeof v, nullptr, 10'000'000'000ull) != int(sizeof v)) return out;
     out.push_back(v);
-    while (chm_msgq_try_receive(q, &v, sizeof v, nullptr) == int(sizeof v)) out.push_back(v);
+    // A try call gives up at once while the lock is busy (our monitor may
+    // still be repairing the queue after the kill), so an -EAGAIN ends
+    // the drain only once the queue says it is empty; bounded.
+    const std::uint64_t end = now_ns() + 10'000'000'000ull;
+    for (;;) {
+        const int r = chm_msgq_try_receive(q, &v, sizeof v, nullptr);
+        if (r == int(sizeof v)) {
+            out.push_back(v);
+            continue;
+        }
+        chm_msgq_info_t i{};
+        if (r != -EAGAIN || chm_msgq_info(q, &i) != 0 || i.count == 0 || now_ns() > end) break;
+        sleep_us(200);
+    }
     return out;
 }
 

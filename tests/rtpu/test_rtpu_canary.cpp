@@ -230,4 +230,45 @@ TEST_F(CanaryTest, AnRtpuDropsItsCapabilitiesAndRootIsNotNeeded) {
     r = run({CHIMERA_BIN, "rm", "--backplane", other});
 }
 
+// A member killed a moment ago, its slot not yet recovered, is gone, not a
+// forgery: a ring to it used to be refused ("pid ... names no live process:
+// not signalled", on stderr) and express mail to it failed with -EPERM,
+// where rtpu.h promises -EHOSTDOWN once the slot is recovered (the chaos
+// soak's pings met it a few times a minute; docs/backplane.md, "Chaos
+// soak"). In a copy of the file, slot 1 names the killed RTPU and its
+// recoverer word names a live canary, so nobody recovers the slot while
+// the ping runs: it can only time out, or find the slot gone.
+TEST_F(CanaryTest, AMemberThatJustDiedIsGoneNotRefused) {
+    create();
+    const pid_t p1 = start_rtpu(1);
+    ASSERT_TRUE(wait_serving(1, p1)) << read_file(err_of(1));
+    canary_ = spawn({"/bin/sleep", "120"}, dir_ + "/canary.out", dir_ + "/canary.err");
+    forget(canary_);
+    ASSERT_GT(canary_, 0);
+    std::uint64_t cstart = 0;
+    for (int i = 0; i < 200 && (cstart = start_time(canary_)) == 0; ++i) nap_ms(5);
+    ASSERT_NE(cstart, 0u);
+    std::string img = read_file(bp_);  // slot 1 RUNNING with p1
+    kill(p1, SIGKILL);
+    ASSERT_EQ(reap(p1), -SIGKILL);
+    const auto& h = *reinterpret_cast<const chm::bp::Header*>(img.data());
+    auto* e = reinterpret_cast<chm::bp::RtpuEntry*>(&img[h.regions[chm::bp::kRegionTable].offset + 1 * 128]);
+    ASSERT_EQ(e->pid.load(), std::uint32_t(p1));
+    e->recoverer.store(chm::bp::recoverer_word(std::uint32_t(canary_), cstart));
+    e->idle.store(3);  // asleep in ppoll: a ring sends the directed signal
+    const std::string copy = dir_ + "/dead.bp";
+    {
+        const int fd = open(copy.c_str(), O_WRONLY | O_CREAT | O_EXCL, 0600);
+        ASSERT_GE(fd, 0);
+        ASSERT_EQ(write(fd, img.data(), img.size()), ssize_t(img.size()));
+        close(fd);
+    }
+    (void)chm_bp_leave();
+    ASSERT_EQ(chm_bp_attach_host(copy.c_str(), "pinger", nullptr), 0) << chm_bp_last_error();
+    chm_rtpu_timeout_set(300'000'000);
+    const int r = chm_rtpu_ping(1, nullptr);
+    EXPECT_TRUE(r == -ETIMEDOUT || r == -EHOSTDOWN) << r << " " << chm_bp_last_error();
+    EXPECT_TRUE(canary_alive()) << canary_status_;
+}
+
 }  // namespace

@@ -222,6 +222,46 @@ int pidfd_signal(int pidfd, int sig) {
 #endif
 }
 
+// A refused member whose pid names a process that exited, is a zombie or
+// is exiting died before its slot was recovered: a death, not a forged
+// entry. Nothing
+// is signalled either way; the caller learns the member is gone (-ESRCH,
+// as for a member that left), not a refusal (-EPERM, which express mail
+// returned to the user for a peer killed a moment before, where the API
+// promises -EHOSTDOWN once the slot is recovered), and nothing is written
+// to stderr.
+// Exited, a zombie, or exiting: the kernel sets PF_EXITING (0x4 in the
+// flags, field 9 of /proc/PID/stat) as the exit begins, before the process
+// unmaps its memory and its threads go, which the checks above then miss.
+bool exiting(int pid) {
+    const int fd = open_proc(pid, "stat");
+    if (fd < 0) return true;
+    char buf[1024];
+    const ssize_t n = ::read(fd, buf, sizeof buf - 1);
+    ::close(fd);
+    if (n <= 0) return true;
+    buf[n] = 0;
+    const char* s = std::strrchr(buf, ')');
+    if (!s || s[1] != ' ') return false;
+    s += 2;  // field 3: state
+    if (*s == 'Z' || *s == 'X' || *s == 'x') return true;
+    for (int field = 3; field < 9; ++field) {
+        s = std::strchr(s, ' ');
+        if (!s) return false;
+        ++s;
+    }
+    unsigned long flags = 0;
+    while (*s >= '0' && *s <= '9') flags = flags * 10 + unsigned(*s++ - '0');
+    return flags & 0x4;
+}
+
+bool gone(std::uint32_t slot, std::uint32_t pid) {
+    if (!exiting(int(pid))) return false;
+    set_error("backplane %s: RTPU table slot %u: pid %u has exited or is exiting: not signalled",
+              current() ? current()->path : "?", slot, pid);
+    return true;
+}
+
 int signal_thread(const View& v, int fd, std::uint32_t slot, int sig) {
     const RtpuEntry* e = v.rtpu(slot);
     const std::uint32_t status = e->status.load(std::memory_order_acquire);
@@ -249,11 +289,13 @@ int signal_thread(const View& v, int fd, std::uint32_t slot, int sig) {
             c.seq.store(even + 2, std::memory_order_release);
         }
         if (!ok) {
+            if (gone(slot, pid)) return -ESRCH;
             report(why);  // once per key: later wakes hit the cached refusal
             return -EPERM;
         }
     }
     if (!ok) {
+        if (gone(slot, pid)) return -ESRCH;
         set_error("backplane %s: RTPU table slot %u: pid %u / tid %u refused before: not signalled",
                   current() ? current()->path : "?", slot, pid, tid);
         return -EPERM;

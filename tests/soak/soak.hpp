@@ -1,0 +1,148 @@
+// The chaos soak's driver (docs/backplane.md, "Chaos soak"): shared state
+// of main.cpp (setup and report), procs.cpp (worker processes), chaos.cpp
+// (the random kills, stops and restarts, and the stall watch) and
+// finish.cpp (the orderly end and every check).
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <set>
+#include <string>
+#include <vector>
+
+#include <sys/types.h>
+
+#include "chimera/msgq.h"
+#include "chimera/rsem.h"
+
+extern "C" {
+#include "ledger.h"
+#include "worker.h"
+}
+
+namespace soak {
+
+struct Options {
+    unsigned seconds = 600;
+    uint64_t seed = 0;         // 0: from the clock (printed either way)
+    unsigned rtpus = 3, hosts = 2;
+    unsigned sem_units = 2;
+    unsigned stop_max_ms = 1000;  // longest SIGSTOP
+    unsigned slack_ms = 5000;     // scheduling allowance of the stall bound (loaded shared host)
+    unsigned gap_min_ms = 100, gap_max_ms = 500; // between chaos actions
+    // The programs it runs; meson builds the paths in (soak/meson.build).
+    std::string rtpu_bin = SOAK_RTPU_BIN, host_bin = SOAK_HOST_BIN, worker_so = SOAK_WORKER_SO,
+                bpcheck_bin = SOAK_BPCHECK_BIN;
+    bool quiet = false;
+};
+
+// A worker process: an RTPU running worker.c in two tasks, or a host process
+// running it once.
+struct Proc {
+    enum State { Down, Starting, Up, Stopped, Terminating };
+    unsigned id = 0;              // its first worker (and its log's name)
+    std::vector<unsigned> ids;    // every worker it runs: an RTPU runs two tasks
+    int rtpu = 0;         // RTPU number (1..), 0 for a host
+    pid_t pid = -1;
+    State state = Down;
+    State resume = Up;    // Stopped: the state SIGCONT returns it to (Up or Starting)
+    uint64_t since = 0;   // when it entered `state`
+    uint64_t floor = 0;   // heartbeats before this do not count (start, SIGCONT)
+    uint64_t due = 0;     // Down: restart time; Stopped: SIGCONT time
+    bool killed = false;  // we sent SIGKILL or SIGTERM: its end is expected
+    std::string name() const;
+};
+
+struct Counts {
+    uint64_t kills = 0, kills_rtpu = 0, kills_host = 0, kills_stopped = 0, kills_starting = 0;
+    uint64_t terms = 0, stops = 0, stops_starting = 0, restarts = 0, actions = 0;
+    uint64_t units_returned = 0, sem_doubt = 0, shm_doubt = 0, dead_bufs_partial = 0;
+    uint64_t stall_samples = 0;
+};
+
+// The worst stall one survivor showed, and what it was doing.
+struct Stall {
+    uint64_t ns = 0;
+    unsigned worker = 0;
+    uint32_t op = 0;
+    std::string peer_stopped;  // the process stopped meanwhile, if any
+};
+
+class Driver {
+public:
+    explicit Driver(Options o) : opt_(std::move(o)) {}
+    int run();  // the whole soak; 0 when every check held
+
+    // procs.cpp
+    void start(Proc& p);
+    bool reap(Proc& p, int timeout_ms, int* status);
+    void absorb_death(Proc& p);
+    void absorb_worker(const Proc& p, unsigned id);
+    std::vector<pid_t> leftover_processes() const;
+
+    // chaos.cpp
+    void chaos_phase();
+    void tick(bool chaos);
+    void act();
+    void strike(Proc& p);
+    void do_stop(Proc& p);
+    void do_kill(Proc& p);
+    void watch_stalls();
+    void nap_witness(unsigned ms);
+    uint64_t excused(uint64_t& seen_from, uint64_t& host_at, uint64_t from) const;
+    bool all_started(const Proc& p) const;
+    std::string log_tail(const Proc& p) const;
+    void watch_objects();
+
+    // finish.cpp
+    void finish();
+    void abandon();
+    void quiesce();
+    void drain_and_account();
+    void check_sem_and_shm();
+    void check_file_and_leftovers();
+
+    void failure(const std::string& what);
+    uint64_t rnd();
+    uint64_t rnd_range(uint64_t lo, uint64_t hi) { return lo + rnd() % (hi - lo + 1); }
+
+    Options opt_;
+    std::string dir_, bp_, ledger_path_;
+    soak_ledger_t* led_ = nullptr;
+    std::vector<Proc> procs_;
+    chm_msgq_t* q_[SOAK_QUEUES] = {};
+    chm_rsem_t* sem_ = nullptr;
+    soak_shm_t* shm_ = nullptr;
+    uint64_t rng_ = 0, t0_ = 0, next_action_ = 0, last_tick_ = 0, worst_tick_gap_ = 0;
+    uint64_t bound_ns_ = 0;
+    Counts n_;
+    Stall worst_;
+    // Objects (SOAK_OBJ_*): each must do its job (a message in or out, a
+    // P, a write) within the bound, from the moment every worker was first up.
+    uint64_t obj_floor_ = 0, worst_obj_ns_ = 0, mail_floor_ = 0;
+    unsigned worst_obj_ = 0;
+    uint64_t obj_reported_[SOAK_OBJECTS] = {};
+    std::vector<uint64_t> worst_per_worker_;
+    std::vector<uint64_t> stall_reported_;   // per worker: the heartbeat whose overlong gap was reported
+    // The host's own stalls, as the driver's naps overslept them (a
+    // witness that makes no backplane call): a survivor's gap counts
+    // against the bound less the host stall that fell inside it.
+    uint64_t host_stall_ = 0, worst_net_ = 0;
+    std::vector<uint64_t> seen_from_, host_at_;                       // per worker
+    uint64_t obj_seen_from_[SOAK_OBJECTS] = {}, obj_host_at_[SOAK_OBJECTS] = {};
+    std::vector<std::set<uint32_t>> doubt_;  // per sender: sequences whose send a death left in doubt
+    std::vector<soak_msg_t> dead_bufs_;      // complete messages found in dead receivers' buffers
+    std::vector<std::string> failures_;
+    std::map<std::string, std::string> report_;  // key = value lines of the summary
+};
+
+uint64_t now_ns();
+extern volatile int g_interrupted;  // SIGINT, SIGTERM or SIGHUP arrived: clean up and fail
+inline const char* op_name(uint32_t op) {
+    static const char* const names[SOAK_OP_COUNT] = {"none",     "send",     "receive", "P/V",
+                                                     "shm write", "shm read", "pause",   "ping"};
+    return op < SOAK_OP_COUNT ? names[op] : "?";
+}
+void nap_ms(unsigned ms);
+
+}  // namespace soak
