@@ -53,7 +53,7 @@ CHM_CHECK int chm_spin_init(chm_spin_t* lock);
  * CLOCK_MONOTONIC, also under a virtual-clock kernel): CHM_FOREVER (or
  * CHM_SPIN_FOREVER) no bound; CHM_NO_WAIT one attempt.
  * Returns 0; -EOWNERDEAD: acquired, but the previous holder died holding
- * it (repair the data it protects); -EAGAIN: held by another, and
+ * it, or its task ended holding it (repair the data it protects); -EAGAIN: held by another, and
  * timeout_ns is CHM_NO_WAIT (it was -ETIMEDOUT before the timeout
  * convention); -ETIMEDOUT: not acquired within a positive timeout_ns;
  * -EINVAL NULL or misaligned; -ENOTCONN not attached.

@@ -30,6 +30,20 @@ Lock* as_lock(chm_spin_t* l) {
 // chm_spin_lock's -ETIMEDOUT and -EOWNERDEAD, and trylock's -EBUSY, are
 // outcomes and never raise; unlocking a lock one does not hold (-EPERM)
 // is a bug and does.
+namespace {
+// A user's spin-lock guards data the library cannot see, so it is dirty
+// for as long as it is held: a holder that ends without unlocking it (a
+// dead process, or a task ended holding it: its hold list orphans a
+// dirty lock) hands it on as owner-died (-EOWNERDEAD) and the next
+// holder repairs the data. Released clean, the next holder would take
+// a half-made change for a whole one (the chaos soak's seqlock block
+// did: its sequence's parity inverted after an RTPU stopped mid-write).
+int held(Lock* l, int r) {
+    if (r == 0 || r == -EOWNERDEAD) lock_mark_dirty(l);
+    return r;
+}
+}  // namespace
+
 extern "C" {
 
 int chm_spin_init(chm_spin_t* lock) {
@@ -48,10 +62,10 @@ int chm_spin_lock(chm_spin_t* lock, uint64_t poll_interval_ns, uint64_t timeout_
     const Attachment* a = current();
     if (!a) return chm::ipc::leave(-ENOTCONN, "chm_spin_lock");
     if (timeout_ns == CHM_NO_WAIT) {  // one attempt; busy is -EAGAIN, as every CHM_NO_WAIT
-        const int r = lock_try(*a, l, a->token);
+        const int r = held(l, lock_try(*a, l, a->token));
         return chm::ipc::leave(r == -EBUSY ? -EAGAIN : r, "chm_spin_lock");
     }
-    return chm::ipc::leave(lock_acquire(*a, l, a->token, poll_interval_ns, timeout_ns), "chm_spin_lock");
+    return chm::ipc::leave(held(l, lock_acquire(*a, l, a->token, poll_interval_ns, timeout_ns)), "chm_spin_lock");
 }
 
 int chm_spin_try_lock(chm_spin_t* lock) {
@@ -59,7 +73,7 @@ int chm_spin_try_lock(chm_spin_t* lock) {
     if (!l) return chm::ipc::leave(-EINVAL, "chm_spin_try_lock");
     const Attachment* a = current();
     if (!a) return chm::ipc::leave(-ENOTCONN, "chm_spin_try_lock");
-    const int r = lock_try(*a, l, a->token);
+    const int r = held(l, lock_try(*a, l, a->token));
     return chm::ipc::leave(r == -EBUSY ? -EAGAIN : r, "chm_spin_try_lock");
 }
 
@@ -75,6 +89,7 @@ int chm_spin_unlock(chm_spin_t* lock) {
     const Attachment* a = current();
     if (!a) return chm::ipc::leave(-ENOTCONN, "chm_spin_unlock");
     if (l->token.load(std::memory_order_relaxed) != a->token) return chm::ipc::leave(-EPERM, "chm_spin_unlock");
+    lock_clear_dirty(l);
     lock_release(l);
     return 0;
 }
