@@ -385,9 +385,13 @@ TEST_F(HostTest, AStopIsNotHeldByAStuckHostCall) {
     std::printf("stopped %llu ms after SIGTERM\n", static_cast<unsigned long long>(now_ms() + 8000 - end));
     EXPECT_TRUE(WIFEXITED(st) && WEXITSTATUS(st) == 0) << st << " " << read_file(err_of(0));
     EXPECT_NE(read_file(err_of(0)).find("still in the host's calls at stop"), std::string::npos) << read_file(err_of(0));
+    std::erase(children_, server_);
+    // The task's side runs in an RTPU kernel, whose timer signal TSan
+    // holds back (tests/ipc/meson.build): judged in the other builds; under
+    // TSan this case is for the host server's threads at the stop.
+    if (CHM_UNDER_TSAN) return;
     ASSERT_TRUE(wait_text(probe_out(), "block error", 10000)) << read_file(probe_out());
     EXPECT_NE(read_file(probe_out()).find("host server"), std::string::npos) << read_file(probe_out());
-    std::erase(children_, server_);
 }
 
 TEST_F(HostTest, AHostServerThatDiesFailsTheRequestNotTheTask) {
