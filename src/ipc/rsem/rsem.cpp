@@ -247,6 +247,19 @@ int give_locked(Rsem* s, Waiter** woken) {
     return 0;
 }
 
+// Unlock, then wake `woken` (give_locked's waiter, or nullptr): its slot
+// and identity are read while the lock still keeps its record.
+void unlock_and_wake(Rsem* s, Waiter* woken) {
+    std::uint32_t slot = 0;
+    WaiterId who;
+    if (woken) {
+        slot = owner_slot(woken);
+        who = recorded(woken);
+    }
+    unlock(s);
+    if (woken) wake_granted(grant_of(s, woken), slot, who);
+}
+
 // A task ended waiting in P (an abort or an exception in a handler run at
 // the wait; kernel/task/holds.hpp) with record `p`, number `index` of its
 // semaphore: withdrawn as a timed-out waiter's would be, and a unit
@@ -265,14 +278,7 @@ void withdraw_abandoned(void* p, std::uint32_t index) {
         lock_clear_dirty(&s->lock);
         if (st == kGranted) (void)give_locked(s, &woken);  // (marks the lock dirty itself)
     }
-    std::uint32_t slot = 0;
-    WaiterId who;
-    if (woken) {
-        slot = owner_slot(woken);
-        who = recorded(woken);
-    }
-    unlock(s);
-    if (woken) wake_granted(grant_of(s, woken), slot, who);
+    unlock_and_wake(s, woken);
 }
 
 }  // namespace
@@ -539,14 +545,7 @@ static int rsem_v_impl(chm_rsem_t* h) {
     CHM_STOP_POINT("rsem.v.locked");
     Waiter* w = nullptr;
     const int r = give_locked(s, &w);
-    std::uint32_t slot = 0;
-    WaiterId who;
-    if (w) {
-        slot = owner_slot(w);
-        who = recorded(w);
-    }
-    unlock(s);
-    if (w) wake_granted(grant_of(s, w), slot, who);
+    unlock_and_wake(s, w);
     if (r) set_error("chm_rsem_v: the count would overflow");
     return r;
 }
