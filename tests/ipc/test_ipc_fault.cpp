@@ -368,23 +368,6 @@ bool selected(int a) {
     return !only || std::strcmp(only, kActionName[a]) == 0;
 }
 
-// KNOWN DEFECT, left out on aarch64 only (issue 15, not understood yet):
-// there, after the abort, fault and destroy runs at rsem.v.locked, an
-// abort-cycle owed inside chm_rsem_v is not carried out when the call
-// returns (1 entry, every time, under qemu-aarch64); with the victim's
-// call not in tail position it is. Native x86-64 and m68k pass. Printed
-// whenever it is skipped, so it is not forgotten.
-// The parent counts the driver's rounds with the same predicate, so a
-// skipped pair is neither run nor waited for.
-bool known_defect(const Case& c, int a) {
-#if defined(__aarch64__)
-    return a == kAbortCycle && std::strcmp(c.point, "rsem.v.locked") == 0 && !std::getenv("CHM_FAULT_KNOWN");
-#else
-    (void)c, (void)a;
-    return false;
-#endif
-}
-
 void driver(void*) {
     const int reps = fault_repeats();
     for (const Case& c : kCases) {
@@ -393,11 +376,6 @@ void driver(void*) {
         for (int a = 0; a < kActions; ++a) {
             g_action = Action(a);
             if (!selected(a)) continue;
-            if (known_defect(c, a)) {
-                std::fprintf(stderr, "KNOWN DEFECT skipped on aarch64: %s:%s (CHM_FAULT_KNOWN=1 runs it)\n", c.point,
-                             kActionName[a]);
-                continue;
-            }
             for (int rep = 0; rep < reps; ++rep)
                 if (!run_one(c, Action(a), rep)) chm_kernel_stop(1);
             // Quiescent: the parent runs chimera-bpcheck on the file.
@@ -438,7 +416,7 @@ TEST_F(IpcFault, ATaskEndedAtAnyPointOfAQueueCallLeavesNothingBehind) {
     // Each time the child is quiescent: chimera-bpcheck on the file.
     std::size_t rounds = 0;
     for (const Case& c : kCases)
-        for (int a = 0; a < kActions; ++a) rounds += selected(c) && selected(a) && !known_defect(c, a);
+        for (int a = 0; a < kActions; ++a) rounds += selected(c) && selected(a);
     int status = -1;  // the child's exit status once it ended early
     for (std::size_t i = 0; i < rounds && !board->failed; ++i) {
         ASSERT_TRUE(wait_for(

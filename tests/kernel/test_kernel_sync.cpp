@@ -3,6 +3,7 @@
 #include <cerrno>
 
 #include "kernel_fixture.hpp"
+#include "task/holds.hpp"
 
 namespace chm::test {
 namespace {
@@ -208,6 +209,42 @@ TEST_F(Sync, DeadlineHandlerAbortsTheCycleAndTheEntryRestarts) {
     EXPECT_EQ(g_info.deadline_ns, 4 * kMs);
     EXPECT_EQ(g_info.now_ns, 4 * kMs + 1) << "the handler runs as soon as the deadline has passed";
     EXPECT_EQ(g_info.misses, 1u);
+}
+
+// A cycle aborted from the shallowest frames there are: the entry's only
+// call, in tail position, is the abort itself (what a deadline handler's
+// or the fault injection's abort-cycle comes to when it is owed to the end
+// of a backplane call the entry tail-called). The restart lays the entry
+// frame out under the stack's top; it must not keep its own frame or save
+// its registers there. On aarch64 it did (the entry frame is 176 bytes, the
+// frames above the restart 160): the switch stored the old stack pointer
+// over the new frame's argument, and the restarted entry faulted.
+int g_shallow_entries = 0;
+void* g_shallow_args[2];
+void shallow_aborter(void* arg) {
+    const int n = g_shallow_entries++;
+    if (n < 2) g_shallow_args[n] = arg;
+    if (n > 0) return;  // the restarted cycle only ends
+    chm::kernel::abort_cycle_current();
+}
+
+TEST_F(Sync, ACycleAbortedFromTheShallowestFrameRestartsItsEntry) {
+    start(CHM_SCHED_MUF);
+    g_shallow_entries = 0;
+    chm_task_attr_t a;
+    chm_task_attr_init(&a);
+    a.name = "shallow";
+    a.period_ns = 10 * kMs;
+    chm_tid_t id;
+    static int token;
+    ASSERT_EQ(chm_task_spawn(&id, shallow_aborter, &token, &a), 0);
+    ASSERT_EQ(chm_kernel_run(), 0);
+    ASSERT_EQ(g_shallow_entries, 2) << "the entry restarted once";
+    EXPECT_EQ(g_shallow_args[0], &token);
+    EXPECT_EQ(g_shallow_args[1], &token) << "the restarted entry has its argument";
+    chm_task_status_t st;
+    ASSERT_EQ(chm_task_status(id, &st), 0);
+    EXPECT_EQ(st.end_reason, CHM_TASK_RETURNED) << "it returned, not faulted";
 }
 
 TEST_F(Sync, DeadlineHandlerMayLetTheCycleContinue) {

@@ -70,15 +70,39 @@ void deliver_deadline_miss_locked(Tcb* cur) {
     }
 }
 
-void restart_aborted_cycle_locked(Tcb* cur) {
-    // Restart the entry from the top, on this same stack: we are deep
-    // below the frames context_init rewrites, and never return to them.
-    cur->abort_cycle = false;
+namespace {
+
+// The restart proper, on a frame the caller placed below the top
+// kMinStack bytes of the stack (see below).
+[[noreturn]] __attribute__((noinline)) void restart_from_below(Tcb* cur) {
     port::context_init(&cur->ctx, cur->stack_lo, cur->stack_size, task_start, cur);
     asan::switch_begin(nullptr, cur->stack_lo, cur->stack_size);  // these frames for good
     void* discard;
     chm_port_switch(&discard, cur->ctx.sp);
     __builtin_unreachable();
+}
+
+}  // namespace
+
+void restart_aborted_cycle_locked(Tcb* cur) {
+    // Restart the entry from the top, on this same stack. context_init
+    // writes the entry frame just under the stack's top, and the switch
+    // saves this context's registers just under the stack pointer; an
+    // aborted cycle's frames can be shallow (the entry's tail calls left
+    // a few hundred bytes on aarch64, where each of those two areas is
+    // 176), so the save would overwrite the new frame and the restarted
+    // entry be called with a garbage argument. Step below the top
+    // kMinStack bytes first: nothing of ours is written there after the
+    // frame, and none of these frames is returned to.
+    cur->abort_cycle = false;
+    char here;
+    const auto sp = reinterpret_cast<std::uintptr_t>(&here);
+    const auto floor = reinterpret_cast<std::uintptr_t>(cur->stack_lo) + cur->stack_size - port::kMinStack;
+    if (sp > floor - 64) {
+        void* pad = __builtin_alloca(sp - floor + 64);
+        asm volatile("" : : "r"(pad) : "memory");  // keep the step down
+    }
+    restart_from_below(cur);
 }
 
 }  // namespace chm::kernel
