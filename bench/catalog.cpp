@@ -27,11 +27,13 @@ constexpr RowInfo kRows[] = {
     {"task_destroy", "ns", "peer_pthread_create_join", 99 * us, none, "destroy a task"},
     {"task_set_priority", "ns", "peer_setschedparam", 20 * us, none,
      "change a task's static priority, queues rearranged"},
-    {"timer_resched_noswitch", "ns", "peer_signal_self", 28 * us, ratio_le(1.5),
+    // The target is against the host's own timer-signal floor measured the
+    // same way (the _vs_floor row below). Signal-to-self is shown beside it
+    // for orientation only: no timer is involved, and where the host makes
+    // every timer expiry a VM exit (virtual machines of this kind) a timer
+    // signal alone costs 8x a signal to self.
+    {"timer_resched_noswitch", "ns", "peer_signal_self", 28 * us, none,
      "timer-driven reschedule, the running task stays"},
-    // Where the host makes every timer expiry a VM exit, signal-to-self is
-    // no peer for a timer: the row is also judged against the host's timer
-    // signal to a computing thread (its floor), measured in the same run.
     {"timer_resched_noswitch_vs_floor", "ns", "peer_timer_signal_busy", kNull, ratio_le(1.5),
      "timer_resched_noswitch beside a POSIX timer signal stealing time from a computing thread"},
     {"context_switch_fpu", "ns", "peer_fiber_switch", 66 * us, none,
@@ -85,7 +87,9 @@ constexpr RowInfo kRows[] = {
     // is created, runs and is joined (paper: 220 + 99, create + destroy).
     {"task_spawn_run_exit", "ns", "peer_pthread_create_join", 319 * us, ratio_le(0.01),
      "spawn a task that runs at once and ends; target 100x faster than pthread create + join"},
-    {"task_spawn_run_exit_vs_fiber", "ns", "peer_fiber_create_destroy", kNull, none,
+    // Like for like, the first half of the target: <= 2x a fiber's create +
+    // run + destroy (the second half is the 100x over pthread above).
+    {"task_spawn_run_exit_vs_fiber", "ns", "peer_fiber_create_destroy", kNull, ratio_le(2),
      "task_spawn_run_exit beside a Boost.Context fiber created, run to its end and destroyed"},
     {"task_spawn_destroy_never_runs", "ns", "peer_pthread_create_join", kNull, none,
      "spawn + destroy a task that never runs (cheaper than the peer's work: no target)"},
