@@ -84,6 +84,7 @@ std::string verify_queue();
 std::string verify_sem();
 std::string verify_shm();
 std::string verify_vseg();
+std::string verify_vq();
 std::string verify_ring();
 void victim_ping() {
     chm_rtpu_info_t info;
@@ -96,6 +97,8 @@ int next_ping() {
 void* g_victim_addr;
 std::uint32_t g_refs;  // this process's attaches of "fseg"
 bool g_vseg;           // "vseg" must exist
+bool g_vq;             // "vq" must exist
+chm_msgq_t* g_victim_q;
 
 void fill(std::uint32_t n) {
     for (std::uint32_t i = 0; i < n; ++i) {
@@ -193,6 +196,17 @@ const Case kCases[] = {
          return chm_shm_detach(p);
      },
      verify_vseg},
+    // A new queue "vq" (create is a call scope too: a destroy or
+    // abort-cycle there waits for the queue to be made).
+    {"registry.create.locked", [] {}, [] { (void)chm_msgq_create("vq", nullptr, CHM_SHM_COMMON, &g_victim_q); },
+     [](Action a) { g_vq = deferred(a); },
+     [] {
+         chm_msgq_t* q = nullptr;
+         if (chm_msgq_create("nextq", nullptr, CHM_SHM_COMMON, &q) != 0) return -1;
+         if (chm_msgq_close(q) != 0) return -2;
+         return chm_msgq_destroy("nextq");
+     },
+     verify_vq},
     // Express mail to this RTPU (its server runs below the victim, so the
     // victim reaches its wait): the record claimed, then in flight.
     {"xmail.post.before_write", [] {}, victim_ping, [](Action) {}, next_ping, verify_ring},
@@ -252,6 +266,21 @@ std::string verify_vseg() {
     // The victim's attach (its create) and ours; then the name.
     if (chm_shm_destroy("vseg") != 0 || chm_shm_detach(p) != 0 || chm_shm_detach(p) != 0)
         return "vseg cannot be destroyed";
+    return "";
+}
+
+std::string verify_vq() {
+    chm_msgq_t* q = nullptr;
+    const int r = chm_msgq_open("vq", &q);
+    if ((r == 0) != g_vq) return std::string("vq ") + (r == 0 ? "exists" : "does not exist");
+    if (r != 0) return "";
+    const std::uint32_t v = 7;
+    std::uint32_t got = 0;
+    if (chm_msgq_try_send(q, 0, 0, &v, sizeof v) != 0 || chm_msgq_try_receive(q, &got, sizeof got, nullptr) != int(sizeof got) ||
+        got != v)
+        return "vq does not carry a message";
+    // Ours and the victim's open; then the name.
+    if (chm_msgq_close(q) != 0 || chm_msgq_close(q) != 0 || chm_msgq_destroy("vq") != 0) return "vq cannot be destroyed";
     return "";
 }
 

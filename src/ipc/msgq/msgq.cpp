@@ -13,6 +13,7 @@
 #include "chimera/msgq.h"
 #include "ipc/err/report.hpp"
 #include "ipc/msgq/msgq.hpp"
+#include "kernel/task/holds.hpp"
 
 using namespace chm::bp;
 using namespace chm::ipc::msgq;
@@ -87,6 +88,7 @@ void chm_msgq_attr_init(chm_msgq_attr_t* attr) {
 }
 
 static int msgq_create_impl(const char* name, const chm_msgq_attr_t* attr_in, int where, chm_msgq_t** out) {
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     chm_msgq_attr_t attr;
     if (attr_in) attr = *attr_in;
     else chm_msgq_attr_init(&attr);
@@ -170,6 +172,7 @@ static int msgq_create_impl(const char* name, const chm_msgq_attr_t* attr_in, in
 }
 
 static int msgq_open_impl(const char* name, chm_msgq_t** out) {
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     if (!name || !out) return set_error("chm_msgq_open: NULL name or out"), -EINVAL;
     Attachment* a = need_attachment("chm_msgq_open");
     if (!a) return -ENOTCONN;
@@ -198,6 +201,7 @@ static int msgq_open_impl(const char* name, chm_msgq_t** out) {
 }
 
 static int msgq_close_impl(chm_msgq_t* q) {
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     Attachment* a = need_attachment("chm_msgq_close");
     if (!a) return -ENOTCONN;
     const char* p = reinterpret_cast<const char*>(q);
@@ -212,6 +216,7 @@ static int msgq_close_impl(chm_msgq_t* q) {
 }
 
 static int msgq_destroy_impl(const char* name) {
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     if (!name) return set_error("chm_msgq_destroy: NULL name"), -EINVAL;
     Attachment* a = need_attachment("chm_msgq_destroy");
     if (!a) return -ENOTCONN;

@@ -83,6 +83,7 @@ static int shm_attach_impl(const char* name, void** out, size_t* size) {
 }
 
 static int shm_detach_impl(void* addr) {
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     Attachment* a = need_attachment();
     if (!a) return -ENOTCONN;
     const char* p = static_cast<const char*>(addr);
@@ -97,6 +98,7 @@ static int shm_detach_impl(void* addr) {
 }
 
 static int shm_destroy_impl(const char* name) {
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     if (!name) return set_error("chm_shm_destroy: NULL name"), -EINVAL;
     Attachment* a = need_attachment();
     if (!a) return -ENOTCONN;
