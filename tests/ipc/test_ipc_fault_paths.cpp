@@ -2,7 +2,8 @@
 // 1; the fault-injection matrix is test_ipc_fault.cpp): a task parked in a
 // backplane wait destroyed by another task and by express mail; a
 // deadline handler's abort-cycle delivered at a wait; a processor
-// exception inside a call that returns to an error mark.
+// exception inside a call that returns to an error mark; a real bad user
+// buffer, which faults before the queue is locked.
 #include <sys/mman.h>
 
 #include <cstdint>
@@ -14,6 +15,7 @@
 #include "chimera/shm.h"
 #include "chimera/spin.h"
 #include "ipc/backplane/stop_point.hpp"
+#include "ipc/msgq/msgq.hpp"
 #include "ipc/xmail/xmail.hpp"
 #include "msgq_fixture.hpp"
 
@@ -277,6 +279,75 @@ TEST_F(IpcFaultPaths, AReturnToAnErrorMarkFromInsideACallGivesItsLockBack) {
     EXPECT_EQ(got, std::vector<std::uint32_t>{2});
     EXPECT_EQ(check_now(), "");
     munmap(mk, sizeof(Marked));
+}
+
+}  // namespace
+}  // namespace chm::test
+
+namespace chm::test {
+namespace {
+
+// A real bad buffer, no fault point: a send from an unmapped page and a
+// receive into a read-only one fault in the caller's task before the
+// queue's lock is taken (the buffers are probed first), so the queue is
+// never left to repair: its repair count stays 0, the message stays
+// queued, and the next send and receive work at once.
+struct BadBuf {
+    std::atomic<int> jumps{0};
+    std::atomic<int> sent{-1000}, received{-1000};
+    std::atomic<std::uint32_t> got{0};
+};
+BadBuf* g_bad;
+
+void bad_buffer_user(void*) {
+    if (chm_err_on_task(to_mark, nullptr) != 0) return;
+    void* none = mmap(nullptr, 8192, PROT_NONE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    void* ro = mmap(nullptr, 8192, PROT_READ, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    if (none == MAP_FAILED || ro == MAP_FAILED) return chm_kernel_stop(1);
+    static chm_err_mark_t m;  // static: read after the jump
+    if (chm_err_mark(&m) == 0) (void)chm_msgq_send(g_q, 0, 0, none, 4);  // faults, to the mark
+    (void)chm_err_unmark(&m);
+    ++g_bad->jumps;
+    const std::uint32_t one = 1;
+    g_bad->sent = chm_msgq_try_send(g_q, 0, 0, &one, sizeof one);
+    if (chm_err_mark(&m) == 0) (void)chm_msgq_receive(g_q, ro, 4, nullptr);  // faults, to the mark
+    (void)chm_err_unmark(&m);
+    ++g_bad->jumps;
+    std::uint32_t v = 0;
+    g_bad->received = chm_msgq_try_receive(g_q, &v, sizeof v, nullptr);
+    g_bad->got = v;
+    chm_kernel_stop(0);
+}
+
+TEST_F(IpcFaultPaths, ABadUserBufferFaultsBeforeTheQueueIsLocked) {
+    auto* bb = static_cast<BadBuf*>(
+        mmap(nullptr, sizeof(BadBuf), PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0));
+    ASSERT_NE(bb, MAP_FAILED);
+    new (bb) BadBuf();
+    g_bad = bb;
+    create();
+    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
+    chm_msgq_t* q = make_queue("fq", CHM_MSGQ_FIFO, 8, kDepth);
+    ASSERT_NE(q, nullptr);
+    const std::string path = path_;
+    const pid_t child = spawn([path] {
+        return run_rtpu(path, 1, [] {
+            if (chm_msgq_open("fq", &g_q)) _exit(101);
+            spawn_task(bad_buffer_user, nullptr, "badbuf", 20, 0);
+        });
+    });
+    EXPECT_EQ(reap(child), 0);
+    EXPECT_EQ(bb->jumps.load(), 2) << "both calls faulted back to the mark";
+    EXPECT_EQ(bb->sent.load(), 0);
+    EXPECT_EQ(bb->received.load(), int(sizeof(std::uint32_t)));
+    EXPECT_EQ(bb->got.load(), 1u) << "the receive that faulted took no message";
+    EXPECT_EQ(reinterpret_cast<ipc::msgq::QueueHeader*>(q)->repairs.load(), 0u)
+        << "the queue was locked when the task faulted, and rebuilt by its next user";
+    chm_msgq_info_t info;
+    ASSERT_EQ(chm_msgq_info(q, &info), 0);
+    EXPECT_EQ(info.count, 0u);
+    EXPECT_EQ(check_now(), "");
+    munmap(bb, sizeof(BadBuf));
 }
 
 }  // namespace

@@ -68,7 +68,8 @@ int put_locked(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t se
     s->prio.store(prio, R);
     s->seq.store(bump(q->next_seq, 1), R);
     s->sender.store(sender, R);
-    // A fault in this copy (a bad user buffer) ends the task here, the
+    // A bad user buffer faulted before the lock (probe_readable); one
+    // unmapped since would fault in this copy and end the task here, the
     // slot off the free list and the lock dirty: the task's hold list
     // orphans the lock and its next user rebuilds the lists.
     CHM_STOP_POINT("msgq.send.copy");
@@ -350,6 +351,31 @@ int run(const bp::Attachment* a, QueueHeader* q, const Geo& g, const Op& op, Wai
     return r;
 }
 
+// Touch every page of the caller's buffer before the queue's lock is
+// taken, so a bad buffer (unmapped, or read-only for a receive) faults in
+// the caller's task with nothing held, not in the copy under the lock. A
+// 4 KiB stride touches every page whatever the host's page size. A buffer
+// unmapped by another task between this and the copy still faults under
+// the lock: the task's hold list covers that (kernel/task/holds.hpp).
+constexpr std::uintptr_t kProbeStride = 4096;
+
+void probe_readable(const void* p, std::size_t n) {
+    if (!n) return;
+    auto* c = static_cast<const volatile char*>(p);
+    for (std::size_t off = 0; off < n; off += kProbeStride - (reinterpret_cast<std::uintptr_t>(c + off) % kProbeStride))
+        (void)c[off];
+    (void)c[n - 1];
+}
+
+void probe_writable(void* p, std::size_t n) {
+    if (!n) return;
+    auto* c = static_cast<volatile char*>(p);
+    // Written back as read: the caller's bytes are unchanged.
+    for (std::size_t off = 0; off < n; off += kProbeStride - (reinterpret_cast<std::uintptr_t>(c + off) % kProbeStride))
+        c[off] = c[off];
+    c[n - 1] = c[n - 1];
+}
+
 int send_common(const char* fn, chm_msgq_t* h, std::uint32_t type, std::uint32_t prio, const void* data,
                 std::size_t len, WaitLimit limit) {
     bp::Attachment* a = bp::current();
@@ -362,6 +388,7 @@ int send_common(const char* fn, chm_msgq_t* h, std::uint32_t type, std::uint32_t
     if (len > g->max_msg || len > g->max_bytes)
         return bp::set_error("%s: %zu bytes, the queue takes at most %u", fn, len,
                              g->max_msg < g->max_bytes ? g->max_msg : g->max_bytes), -EMSGSIZE;
+    probe_readable(data, len);
     const SendOp op{a->slot, type, prio, std::uint32_t(len), data};
     return run(a, q, *g, op, limit);
 }
@@ -374,6 +401,7 @@ int recv_common(const char* fn, chm_msgq_t* h, void* buf, std::size_t size, chm_
     QueueHeader* q = handle_queue(a, h, &g);
     if (!q) return bad_handle(fn, h);
     if (!buf && size) return bp::set_error("%s: NULL buffer", fn), -EINVAL;
+    probe_writable(buf, size < g->max_msg ? size : g->max_msg);  // no message is longer
     const RecvOp op{buf, size, info};
     return run(a, q, *g, op, limit);
 }
