@@ -17,6 +17,7 @@
 #include <algorithm>
 #include <cstdarg>
 #include <cstdint>
+#include <thread>
 #include <vector>
 
 #include "chimera/rsem.h"
@@ -123,6 +124,55 @@ int next_v() {
     return chm_rsem_v(g_s);
 }
 
+// rsem.v.granted: one waiter parked in P when the victim's V grants it. A
+// task of the driver's RTPU in the in-task matrix, a thread of this host
+// process in the kill matrix (g_host_waiter). Its P is bounded (10 s): a
+// grant left half done shows as -ETIMEDOUT, the unit lost.
+bool g_host_waiter;
+std::atomic<int> g_waiter_result{0};
+chm_tid_t g_waiter_task = CHM_TID_NONE;
+constexpr int kWaiting = 1;  // g_waiter_result while the P has not returned
+constexpr std::uint64_t kWaiterTimeoutNs = 10'000'000'000ull;
+
+void waiter_entry(void*) {
+    g_waiter_result = chm_rsem_p_timed(g_s, kWaiterTimeoutNs);
+}
+void pause_ms(unsigned ms) {
+    if (g_host_waiter)
+        sleep_us(ms * 1000);
+    else
+        chm_task_pause_until(chm_time_now() + std::uint64_t(ms) * 1'000'000);
+}
+void start_waiter() {
+    g_waiter_result = kWaiting;
+    if (g_host_waiter) {
+        std::thread([] { g_waiter_result = chm_rsem_p_timed(g_s, kWaiterTimeoutNs); }).detach();
+    } else {
+        chm_task_attr_t at;
+        chm_task_attr_init(&at);
+        at.name = "waiter";
+        at.priority = 15;  // between the driver and the victim
+        at.joinable = 1;
+        if (chm_task_spawn(&g_waiter_task, waiter_entry, nullptr, &at) != 0) fail("spawn of the waiter failed");
+    }
+    for (int i = 0; i < 10000 && chm_rsem_waiting(g_s) != 1; ++i) pause_ms(1);
+    if (chm_rsem_waiting(g_s) != 1) fail("the waiter did not come to wait in P within 10 s");
+}
+// The waiter got the victim's unit: its P returned 0 (within its bound).
+std::string verify_granted_sem() {
+    for (int i = 0; i < 15000 && g_waiter_result.load() == kWaiting; ++i) pause_ms(1);
+    const int r = g_waiter_result.load();
+    if (!g_host_waiter && g_waiter_task != CHM_TID_NONE) {
+        chm_task_status_t st;
+        (void)chm_task_join(g_waiter_task, 20'000'000'000ull, &st);
+        g_waiter_task = CHM_TID_NONE;
+    }
+    if (r != 0)
+        return "the waiter granted by the victim's V: its P returned " + std::to_string(r) +
+               (r == -ETIMEDOUT ? " (never woken: the unit was lost)" : "");
+    return verify_sem();
+}
+
 const Case kCases[] = {
     {"msgq.send.copy", [] { fill(1); }, victim_send,
      [](Action a) {
@@ -172,6 +222,9 @@ const Case kCases[] = {
          if (deferred(a)) ++g_units;  // the V completed first
      },
      next_v, verify_sem},
+    // The victim's V between marking the waiter's record GRANTED and
+    // storing its grant word; whoever repairs the lock finishes the grant.
+    {"rsem.v.granted", start_waiter, [] { (void)chm_rsem_v(g_s); }, [](Action) {}, next_v, verify_granted_sem},
     // Segment "fseg" (made by the parent): the victim attaches it.
     {"shm.attach.locked", [] {}, [] { (void)chm_shm_attach("fseg", &g_victim_addr, nullptr); },
      [](Action a) {
@@ -499,6 +552,7 @@ TEST_F(IpcFault, AnRtpuKilledAtAnyPointOfACallLeavesNothingBehind) {
     void* seg = nullptr;
     ASSERT_EQ(chm_shm_create("fseg", 256, CHM_SHM_COMMON, &seg), 0) << chm_bp_last_error();
     g_refs = 1;  // the create's attach (the first check gives it back)
+    g_host_waiter = true;
     const int reps = kill_repeats();
     std::vector<std::uint64_t> recovered, used;  // kill -> slot DEAD; the next user's call
     for (const Case& c : kCases) {

@@ -117,14 +117,53 @@ int validate_sem(const Rsem* s, char* why, std::size_t n) {
     return 0;
 }
 
-// Count the waiting records again: the repair after a holder died between
-// marking the lock dirty and clearing it.
+std::uint32_t* grant_of(Rsem* s, const Waiter* w) {
+    return reinterpret_cast<std::uint32_t*>(&s->grant[w - s->w].word);
+}
+const std::uint32_t* grant_of(const Rsem* s, const Waiter* w) {
+    return reinterpret_cast<const std::uint32_t*>(&s->grant[w - s->w].word);
+}
+
+std::uint32_t owner_slot(const Waiter* w) { return token_slot(w->owner.load()); }
+
+WaiterId recorded(const Waiter* w) { return WaiterId{w->task.load(), w->urgency.load()}; }
+
+// A record marked GRANTED whose grant word was never stored: its granter
+// (a V, a withdrawal, a recovery) ended between give_locked's two stores.
+// Only ever seen under a lock left dirty.
+bool half_granted(const Rsem* s, const Waiter& w) {
+    return w.state.load() == kGranted &&
+           !chm::kernel::word_granted(__atomic_load_n(grant_of(s, &w), __ATOMIC_ACQUIRE));
+}
+
+int give_locked(Rsem* s, Waiter** woken);
+
+// The repair after a holder died (or its task ended) between marking the
+// lock dirty and clearing it. nwaiting is counted again; a grant left half
+// done is finished: a live waiter gets its word and is woken now (under
+// the lock: this is rare, and a granted waiter takes its unit without the
+// lock), a dead or departed one's unit goes to the next waiter or the
+// count.
 void repair_locked(Rsem* s) {
-    std::uint32_t n = 0;
-    for (Waiter& w : s->w)
+    std::uint32_t n = 0, passed = 0;
+    const Attachment* a = current();
+    for (Waiter& w : s->w) {
         if (w.state.load() == kWaiting) ++n;
+        if (!half_granted(s, w)) continue;
+        if (a && token_alive(*a, w.owner.load(), false)) {
+            if (!store_grant(grant_of(s, &w), 1)) wake_granted(grant_of(s, &w), owner_slot(&w), recorded(&w));
+        } else {
+            w.state.store(kFree);
+            ++passed;
+        }
+    }
     s->nwaiting.store(n);
     if (s->kind.load() == CHM_SEM_BINARY && s->count.load() > 1) s->count.store(1);
+    for (; passed; --passed) {  // the rest is consistent: a death in here loses only these units
+        Waiter* w = nullptr;
+        (void)give_locked(s, &w);
+        if (w) wake_granted(grant_of(s, w), owner_slot(w), recorded(w));
+    }
 }
 
 // How long a call waits for the semaphore's lock held by a live process
@@ -187,14 +226,6 @@ int lock(Rsem* s, LockWait wait = LockWait::kBlocking, std::uint64_t budget = 0)
 
 void unlock(Rsem* s) { lock_release(&s->lock); }
 
-std::uint32_t* grant_of(Rsem* s, const Waiter* w) {
-    return reinterpret_cast<std::uint32_t*>(&s->grant[w - s->w].word);
-}
-
-std::uint32_t owner_slot(const Waiter* w) { return token_slot(w->owner.load()); }
-
-WaiterId recorded(const Waiter* w) { return WaiterId{w->task.load(), w->urgency.load()}; }
-
 // The most urgent waiting record, or nullptr. Lock held. A record whose
 // process died or left (its token no longer live) is dropped on the way,
 // as message queues do: its recovery has not run yet, and a unit granted
@@ -233,6 +264,7 @@ int give_locked(Rsem* s, Waiter** woken) {
         // Before the grant (whose exchange releases it): the waiter frees
         // its record after seeing the grant, without the lock.
         w->state.store(kGranted, R);
+        CHM_STOP_POINT("rsem.v.granted");  // mid-grant: GRANTED, its word not stored yet
         const bool watched = store_grant(grant_of(s, w), 1);
         lock_clear_dirty(&s->lock);
         if (!watched) *woken = w;
@@ -344,14 +376,18 @@ void rsem_check(const View& v, std::uint32_t off, std::uint32_t size, const char
     const std::uint32_t kind = s->kind.load(R);
     if (kind != CHM_SEM_BINARY && kind != CHM_SEM_COUNTING) return r.problem("%s: kind %u is not a semaphore kind", name, kind);
     if (s->broken.load(R)) r.problem("%s: marked broken", name);
-    const std::uint32_t tok = s->lock.token.load(R);
+    const std::uint32_t nwaiting = s->nwaiting.load(R), seq = s->seq.load(R);
+    const std::uint32_t tok = s->lock.token.load(std::memory_order_acquire);
     if (tok && bp::token_alive(v, tok, true)) return;  // a live holder may be mid-change
+    // A lock its dead holder (or an ended task) left dirty: the next user
+    // repairs the semaphore, so a grant it left half done is not damage.
+    const bool repairable = tok && s->lock.dirty.load(R);
     char what[160];
     std::snprintf(what, sizeof what, "%s.lock", name);
     check_lock(v, s->lock, what, r);
     const std::uint32_t count = s->count.load(R);
     if (kind == CHM_SEM_BINARY && count > 1) r.problem("%s: binary, count %u", name, count);
-    std::uint32_t waiting = 0;
+    std::uint32_t waiting = 0, half = 0, half_at = 0;
     for (std::uint32_t i = 0; i < CHM_RSEM_WAITERS; ++i) {
         const Waiter& w = s->w[i];
         const std::uint32_t st = w.state.load(R);
@@ -361,12 +397,21 @@ void rsem_check(const View& v, std::uint32_t off, std::uint32_t size, const char
             continue;
         }
         waiting += st == kWaiting;
+        if (half_granted(s, w) && !half++) half_at = i;
         const std::uint32_t owner = w.owner.load(R), slot = token_slot(owner);
         if (slot >= v.slots() || !token_alive(v, owner, true))
             r.problem("%s: waiter %u (%s) belongs to slot %u generation %u, not a live process", name, i,
                       st == kWaiting ? "waiting" : "granted", slot, owner & kGenMask);
     }
     if (s->nwaiting.load(R) != waiting) r.problem("%s: nwaiting %u, %u records waiting", name, s->nwaiting.load(R), waiting);
+    // Judged only when no V ran across the scan (a V landing between
+    // reading a record's state and its word would look half done).
+    std::atomic_thread_fence(std::memory_order_acquire);
+    const bool still = s->lock.token.load(R) == tok && s->nwaiting.load(R) == nwaiting && s->seq.load(R) == seq;
+    if (half && !repairable && still)
+        r.problem("%s: waiter %u (and %u more) is GRANTED but its grant word was never stored, on a lock not left "
+                  "dirty: nobody will finish that grant",
+                  name, half_at, half - 1);
     if (count > 0 && waiting > 0) r.problem("%s: count %u while %u waiters wait", name, count, waiting);
 }
 
