@@ -12,8 +12,6 @@
 //  * runs the backplane checker (check_backplane, what chimera-bpcheck
 //    runs), and once per point and action the parent runs chimera-bpcheck
 //    on the file while the child waits.
-#include <sys/mman.h>
-
 #include <algorithm>
 #include <cstdarg>
 #include <cstdint>
@@ -25,7 +23,7 @@
 #include "chimera/rtpu.h"
 #include "ipc/backplane/stop_point.hpp"
 #include "ipc/xmail/xmail.hpp"
-#include "msgq_fixture.hpp"
+#include "fault_fixture.hpp"
 
 namespace chm::test {
 namespace {
@@ -63,7 +61,6 @@ void fail(const char* fmt, ...) {
 
 // ------------------------------------------------------------ the cases
 
-constexpr std::uint32_t kDepth = 4;  // the queue's capacity
 chm_msgq_t* g_q;
 std::uint32_t g_serial = 1;
 std::vector<std::uint32_t> g_expect;  // what the queue must hold, in order
@@ -474,21 +471,17 @@ void driver(void*) {
     chm_kernel_stop(0);
 }
 
-class IpcFault : public MsgqTest {};
+class IpcFault : public FaultTest {};
 
 TEST_F(IpcFault, ATaskEndedAtAnyPointOfAQueueCallLeavesNothingBehind) {
-    auto* board = static_cast<Board*>(
-        mmap(nullptr, sizeof(Board), PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0));
-    ASSERT_NE(board, MAP_FAILED);
-    new (board) Board();
+    SharedBlock<Board> shared;
+    Board* board = shared.get();
+    ASSERT_NE(board, nullptr);
     g_board = board;
-    chm_bp_config_t cfg = small_config();
-    cfg.ring_record_size = 1024;  // an express-mail server needs room for its replies
-    create(cfg);
-    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
-    ASSERT_NE(make_queue("fq", CHM_MSGQ_FIFO, 8, kDepth), nullptr);
+    chm_msgq_t* q = nullptr;
+    ASSERT_NO_FATAL_FAILURE(attach_with_queue(&q, true));  // the RTPU child serves express mail
     chm_rsem_t* s = nullptr;
-    ASSERT_EQ(chm_rsem_create("fs", CHM_SEM_COUNTING, 0, CHM_SHM_COMMON, &s), 0) << chm_bp_last_error();
+    ASSERT_NO_FATAL_FAILURE(make_sem(&s));
     void* seg = nullptr;
     ASSERT_EQ(chm_shm_create("fseg", 256, CHM_SHM_COMMON, &seg), 0) << chm_bp_last_error();
     const std::string path = path_;
@@ -536,7 +529,6 @@ TEST_F(IpcFault, ATaskEndedAtAnyPointOfAQueueCallLeavesNothingBehind) {
     // 1 ms; the figure above is what this machine did; a loaded machine
     // must not fail the test).
     EXPECT_LT(board->worst_ns, 500'000'000ull);
-    munmap(board, sizeof(Board));
 }
 
 }  // namespace
@@ -552,18 +544,12 @@ namespace {
 // server: once the killed sender's slot is recovered, nothing of its
 // request is left in that ring, and the next sender is served at once.
 TEST_F(IpcFault, AnRtpuKilledAtAnyPointOfACallLeavesNothingBehind) {
-    auto* board = static_cast<Board*>(
-        mmap(nullptr, sizeof(Board), PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0));
-    ASSERT_NE(board, MAP_FAILED);
-    new (board) Board();
+    SharedBlock<Board> shared;
+    Board* board = shared.get();
+    ASSERT_NE(board, nullptr);
     g_board = board;
-    chm_bp_config_t cfg = small_config();
-    cfg.ring_record_size = 1024;  // an express-mail server needs room for its replies
-    create(cfg);
-    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
-    g_q = make_queue("fq", CHM_MSGQ_FIFO, 8, kDepth);
-    ASSERT_NE(g_q, nullptr);
-    ASSERT_EQ(chm_rsem_create("fs", CHM_SEM_COUNTING, 0, CHM_SHM_COMMON, &g_s), 0) << chm_bp_last_error();
+    ASSERT_NO_FATAL_FAILURE(attach_with_queue(&g_q, true));  // RTPU 2 serves express mail
+    ASSERT_NO_FATAL_FAILURE(make_sem(&g_s));
     void* seg = nullptr;
     ASSERT_EQ(chm_shm_create("fseg", 256, CHM_SHM_COMMON, &seg), 0) << chm_bp_last_error();
     g_refs = 1;  // the create's attach (the first check gives it back)
@@ -645,7 +631,7 @@ TEST_F(IpcFault, AnRtpuKilledAtAnyPointOfACallLeavesNothingBehind) {
                 "worst %.1f us\n",
                 used.size(), median(recovered), worst(recovered), median(used), worst(used));
     for (std::uint64_t u : used) EXPECT_LT(u, 500'000'000ull);  // far below the 5 s -EDEADLK
-    munmap(board, sizeof(Board));
+    kill9(server);
 }
 
 }  // namespace
