@@ -107,7 +107,7 @@ test-tsan: deps $(BUILD_TSAN)/build.ninja
 stress: deps $(BUILD)/build.ninja
 	meson compile -C $(BUILD)
 	CHM_KILL_REPEATS=2000 CHM_FAULT_REPEATS=2000 $(MESON_TEST) -C $(BUILD) --timeout-multiplier 30 \
-	    ipc_recovery ipc_msgq_robust ipc_fault
+	    ipc_recovery ipc_msgq_robust ipc_fault ipc_fault_kill
 	CHM_DIFF_SEED=0 CHM_DIFF_SETS=20000 $(BUILD)/tests/kernel/test_kernel_sched_diff --gtest_filter='Policies/*'
 
 # The chaos soak (tests/soak, docs/backplane.md "Chaos soak"): 3 RTPUs and

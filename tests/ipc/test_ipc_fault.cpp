@@ -12,19 +12,15 @@
 //  * runs the backplane checker (check_backplane, what chimera-bpcheck
 //    runs), and once per point and action the parent runs chimera-bpcheck
 //    on the file while the child waits.
-#include <sys/mman.h>
-
+// The cases are fault_cases.hpp's; the process kill at the same points is
+// test_ipc_fault_kill.cpp. CHM_FAULT_ONLY=<action> runs one action.
 #include <algorithm>
-#include <cstdarg>
 #include <cstdint>
+#include <cstdlib>
 #include <vector>
 
-#include "chimera/rsem.h"
-#include "chimera/shm.h"
-#include "chimera/rtpu.h"
 #include "ipc/backplane/stop_point.hpp"
-#include "ipc/xmail/xmail.hpp"
-#include "msgq_fixture.hpp"
+#include "fault_cases.hpp"
 
 namespace chm::test {
 namespace {
@@ -35,271 +31,8 @@ int fault_repeats() {
     return n > 0 && n <= 1000000 ? int(n) : 100;
 }
 
-enum Action { kAbort, kFault, kDestroy, kAbortCycle, kActions };
-const char* const kActionName[kActions] = {"abort", "fault", "destroy", "abort_cycle"};
-// Destroy and abort-cycle wait for the call to return or reach its wait;
-// an abort and an exception end the task where it is.
-bool deferred(Action a) { return a == kDestroy || a == kAbortCycle; }
-
-// What the child tells the parent (shared memory, set up before the fork).
-struct Board {
-    std::atomic<int> phase{0};   // child: 1 = quiescent, check the file; parent: 2 = go on
-    std::atomic<int> failed{0};
-    char failure[600] = {};
-    std::uint64_t worst_ns = 0, sum_ns = 0, runs = 0;
-    std::uint64_t lat[8192] = {};  // next-user latencies, for the median
-};
-Board* g_board;
-
-void fail(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
-void fail(const char* fmt, ...) {
-    if (g_board->failed.exchange(1)) return;
-    va_list ap;
-    va_start(ap, fmt);
-    std::vsnprintf(g_board->failure, sizeof g_board->failure, fmt, ap);
-    va_end(ap);
-}
-
-// ------------------------------------------------------------ the cases
-
-constexpr std::uint32_t kDepth = 4;  // the queue's capacity
-chm_msgq_t* g_q;
-std::uint32_t g_serial = 1;
-std::vector<std::uint32_t> g_expect;  // what the queue must hold, in order
-
-int put(std::uint32_t v) { return chm_msgq_try_send(g_q, 0, 0, &v, sizeof v); }
-
-struct Case {
-    const char* point;
-    void (*prepare)();        // driver: bring the object to the state the point needs
-    void (*victim)();         // the call that meets the fault
-    void (*settle)(Action);   // driver: what the victim's call must have done
-    int (*next_user)();       // driver: one call that needs the object's lock (0 = ok)
-    // driver: nobody waits, the object holds exactly what it must; then
-    // it is emptied for the next run. "" or what was wrong.
-    std::string (*verify)();
-};
-
-std::string verify_queue();
-std::string verify_sem();
-std::string verify_shm();
-std::string verify_vseg();
-std::string verify_vq();
-std::string verify_ring();
-void victim_ping() {
-    chm_rtpu_info_t info;
-    (void)chm_rtpu_ping(1, &info);
-}
-int next_ping() {
-    chm_rtpu_info_t info;
-    return chm_rtpu_ping(1, &info);
-}
-void* g_victim_addr;
-std::uint32_t g_refs;  // this process's attaches of "fseg"
-bool g_vseg;           // "vseg" must exist
-bool g_vq;             // "vq" must exist
-chm_msgq_t* g_victim_q;
-
-void fill(std::uint32_t n) {
-    for (std::uint32_t i = 0; i < n; ++i) {
-        const std::uint32_t v = g_serial++;
-        if (put(v) != 0) fail("prefill: try_send failed: %s", chm_bp_last_error());
-        g_expect.push_back(v);
-    }
-}
-
-std::uint32_t g_victim_serial;
-void victim_send() {
-    g_victim_serial = g_serial++;
-    (void)chm_msgq_send(g_q, 0, 0, &g_victim_serial, sizeof g_victim_serial);
-}
-// Into a global: a destroyed victim ends when the call returns, before
-// its caller could store what it received.
-std::uint32_t g_victim_buf;
-void victim_receive() { (void)chm_msgq_receive(g_q, &g_victim_buf, sizeof g_victim_buf, nullptr); }
-
-chm_rsem_t* g_s;
-std::uint32_t g_units;  // what the semaphore's count must be
-void victim_p() { (void)chm_rsem_p(g_s); }  // never granted: nobody Vs meanwhile
-int next_v() {
-    ++g_units;
-    return chm_rsem_v(g_s);
-}
-
-const Case kCases[] = {
-    {"msgq.send.copy", [] { fill(1); }, victim_send,
-     [](Action a) {
-         if (deferred(a)) g_expect.push_back(g_victim_serial);  // the send completed first
-     },
-     [] {
-         const std::uint32_t v = g_serial++;
-         g_expect.push_back(v);
-         return put(v);
-     },
-     verify_queue},
-    {"msgq.receive.copy", [] { fill(2); }, victim_receive,
-     [](Action a) {
-         if (!deferred(a)) return;  // the message it was taking stays queued
-         // The receive completed before the task ended: the first message
-         // is in the victim's buffer, and only there.
-         if (g_victim_buf != g_expect.front()) fail("the victim received %u, not %u", g_victim_buf, g_expect.front());
-         g_expect.erase(g_expect.begin());
-     },
-     [] {
-         const std::uint32_t v = g_serial++;
-         g_expect.push_back(v);
-         return put(v);
-     },
-     verify_queue},
-    {"msgq.send.wait", [] { fill(kDepth); }, victim_send, [](Action) {},
-     [] {  // full: the next user receives
-         std::uint32_t v = 0;
-         const int r = chm_msgq_try_receive(g_q, &v, sizeof v, nullptr);
-         if (r != int(sizeof v) || v != g_expect.front()) return -1;
-         g_expect.erase(g_expect.begin());
-         return 0;
-     },
-     verify_queue},
-    {"msgq.receive.wait", [] {}, victim_receive, [](Action) {},
-     [] {
-         const std::uint32_t v = g_serial++;
-         g_expect.push_back(v);
-         return put(v);
-     },
-     verify_queue},
-    // Remote semaphore "fs", counting, at 0 before each run: P waits.
-    {"rsem.p.locked", [] {}, victim_p, [](Action) {}, next_v, verify_sem},
-    {"rsem.p.wait", [] {}, victim_p, [](Action) {}, next_v, verify_sem},
-    {"rsem.v.locked", [] {}, [] { (void)chm_rsem_v(g_s); },
-     [](Action a) {
-         if (deferred(a)) ++g_units;  // the V completed first
-     },
-     next_v, verify_sem},
-    // Segment "fseg" (made by the parent): the victim attaches it.
-    {"shm.attach.locked", [] {}, [] { (void)chm_shm_attach("fseg", &g_victim_addr, nullptr); },
-     [](Action a) {
-         if (deferred(a)) ++g_refs;  // the attach completed first: the process holds one more
-     },
-     [] {
-         void* p = nullptr;
-         if (chm_shm_attach("fseg", &p, nullptr) != 0) return -1;
-         return chm_shm_detach(p);
-     },
-     verify_shm},
-    // A new segment "vseg": the registry entry half written.
-    {"registry.create.locked", [] {}, [] { (void)chm_shm_create("vseg", 64, CHM_SHM_COMMON, &g_victim_addr); },
-     [](Action a) { g_vseg = deferred(a); },
-     [] {
-         void* p = nullptr;
-         if (chm_shm_create("next", 64, CHM_SHM_COMMON, &p) != 0) return -1;
-         if (chm_shm_destroy("next") != 0) return -2;
-         return chm_shm_detach(p);
-     },
-     verify_vseg},
-    // A new queue "vq" (create is a call scope too: a destroy or
-    // abort-cycle there waits for the queue to be made).
-    {"registry.create.locked", [] {}, [] { (void)chm_msgq_create("vq", nullptr, CHM_SHM_COMMON, &g_victim_q); },
-     [](Action a) { g_vq = deferred(a); },
-     [] {
-         chm_msgq_t* q = nullptr;
-         if (chm_msgq_create("nextq", nullptr, CHM_SHM_COMMON, &q) != 0) return -1;
-         if (chm_msgq_close(q) != 0) return -2;
-         return chm_msgq_destroy("nextq");
-     },
-     verify_vq},
-    // Express mail to this RTPU (its server runs below the victim, so the
-    // victim reaches its wait): the record claimed, then in flight.
-    {"xmail.post.before_write", [] {}, victim_ping, [](Action) {}, next_ping, verify_ring},
-    {"xmail.request.wait", [] {}, victim_ping, [](Action) {}, next_ping, verify_ring},
-};
-
-std::string verify_queue() {
-    chm_msgq_info_t in{};
-    if (chm_msgq_info(g_q, &in) != 0) return "chm_msgq_info failed";
-    if (in.receivers_waiting || in.senders_waiting || in.broken)
-        return std::to_string(in.receivers_waiting) + " receivers and " + std::to_string(in.senders_waiting) +
-               " senders wait, broken " + std::to_string(in.broken);
-    std::vector<std::uint32_t> got;
-    for (std::uint32_t x; chm_msgq_try_receive(g_q, &x, sizeof x, nullptr) == int(sizeof x);) got.push_back(x);
-    if (got != g_expect) {
-        std::string gs, es;
-        for (auto x : got) gs += " " + std::to_string(x);
-        for (auto x : g_expect) es += " " + std::to_string(x);
-        return "the queue held [" + gs + " ], expected [" + es + " ]";
-    }
-    g_expect.clear();
-    return "";
-}
-
-std::string verify_sem() {
-    const int value = chm_rsem_value(g_s), waiting = chm_rsem_waiting(g_s);
-    if (value != int(g_units) || waiting != 0)
-        return "the semaphore's count is " + std::to_string(value) + " (expected " + std::to_string(g_units) +
-               "), " + std::to_string(waiting) + " waiting";
-    for (; g_units; --g_units)
-        if (chm_rsem_try_p(g_s) != 0) return "a unit the count showed could not be taken";
-    if (chm_rsem_try_p(g_s) != -EAGAIN) return "a unit more than the count showed";
-    return "";
-}
-
-std::uint32_t refs_of(const char* name) {
-    bp::Attachment* a = bp::current();
-    bp::EntryInfo info{};
-    return bp::registry_lookup(*a, name, bp::kKindShm, &info) == 0 ? a->local_refs[info.index] : ~0u;
-}
-
-std::string verify_shm() {
-    const std::uint32_t refs = refs_of("fseg");
-    if (refs != g_refs) return "this process attached fseg " + std::to_string(refs) + " times, not " + std::to_string(g_refs);
-    void* p = nullptr;
-    if (chm_shm_attach("fseg", &p, nullptr) != 0) return "fseg cannot be attached";
-    for (++g_refs; g_refs; --g_refs)  // ours and the victim's
-        if (chm_shm_detach(p) != 0) return "an attach it counted cannot be detached";
-    return "";
-}
-
-std::string verify_vseg() {
-    void* p = nullptr;
-    const int r = chm_shm_attach("vseg", &p, nullptr);
-    if ((r == 0) != g_vseg) return std::string("vseg ") + (r == 0 ? "exists" : "does not exist");
-    if (r != 0) return "";
-    // The victim's attach (its create) and ours; then the name.
-    if (chm_shm_destroy("vseg") != 0 || chm_shm_detach(p) != 0 || chm_shm_detach(p) != 0)
-        return "vseg cannot be destroyed";
-    return "";
-}
-
-std::string verify_vq() {
-    chm_msgq_t* q = nullptr;
-    const int r = chm_msgq_open("vq", &q);
-    if ((r == 0) != g_vq) return std::string("vq ") + (r == 0 ? "exists" : "does not exist");
-    if (r != 0) return "";
-    const std::uint32_t v = 7;
-    std::uint32_t got = 0;
-    if (chm_msgq_try_send(q, 0, 0, &v, sizeof v) != 0 || chm_msgq_try_receive(q, &got, sizeof got, nullptr) != int(sizeof got) ||
-        got != v)
-        return "vq does not carry a message";
-    // Ours and the victim's open; then the name.
-    if (chm_msgq_close(q) != 0 || chm_msgq_close(q) != 0 || chm_msgq_destroy("vq") != 0) return "vq cannot be destroyed";
-    return "";
-}
-
-std::string verify_ring() {
-    // The server (priority 5) serves what is still posted while we pause.
-    chm_task_pause_until(chm_time_now() + 2'000'000);
-    bp::Attachment* a = bp::current();
-    bp::RingHeader* ring = a->ring(1);
-    std::string held;
-    for (std::uint32_t i = 0; i < a->geo().ring_records; ++i) {
-        const std::uint32_t st = xmail::record_at(*a, ring, i)->state.load();
-        if (xmail::phase_of(st) != xmail::kFree) held += " " + std::to_string(i) + ":phase " + std::to_string(st & 0xF);
-    }
-    return held.empty() ? "" : "ring records not free:" + held;
-}
-
 // ------------------------------------------------------------ the driver
 
-const Case* g_case;
 Action g_action;
 std::atomic<int> g_entries{0};
 
@@ -385,13 +118,6 @@ bool run_one(const Case& c, Action a, int rep) {
     }
     return true;
 }
-
-// CHM_FAULT_POINT=<name> runs one point, CHM_FAULT_ONLY=<action> one
-// action (to look into a failure).
-bool selected(const Case& c) {
-    const char* p = std::getenv("CHM_FAULT_POINT");
-    return !p || std::strcmp(p, c.point) == 0;
-}
 bool selected(int a) {
     const char* only = std::getenv("CHM_FAULT_ONLY");
     return !only || std::strcmp(only, kActionName[a]) == 0;
@@ -416,21 +142,17 @@ void driver(void*) {
     chm_kernel_stop(0);
 }
 
-class IpcFault : public MsgqTest {};
+class IpcFault : public FaultTest {};
 
 TEST_F(IpcFault, ATaskEndedAtAnyPointOfAQueueCallLeavesNothingBehind) {
-    auto* board = static_cast<Board*>(
-        mmap(nullptr, sizeof(Board), PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0));
-    ASSERT_NE(board, MAP_FAILED);
-    new (board) Board();
+    SharedBlock<Board> shared;
+    Board* board = shared.get();
+    ASSERT_NE(board, nullptr);
     g_board = board;
-    chm_bp_config_t cfg = small_config();
-    cfg.ring_record_size = 1024;  // an express-mail server needs room for its replies
-    create(cfg);
-    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
-    ASSERT_NE(make_queue("fq", CHM_MSGQ_FIFO, 8, kDepth), nullptr);
+    chm_msgq_t* q = nullptr;
+    ASSERT_NO_FATAL_FAILURE(attach_with_queue(&q, true));  // the RTPU child serves express mail
     chm_rsem_t* s = nullptr;
-    ASSERT_EQ(chm_rsem_create("fs", CHM_SEM_COUNTING, 0, CHM_SHM_COMMON, &s), 0) << chm_bp_last_error();
+    ASSERT_NO_FATAL_FAILURE(make_sem(&s));
     void* seg = nullptr;
     ASSERT_EQ(chm_shm_create("fseg", 256, CHM_SHM_COMMON, &seg), 0) << chm_bp_last_error();
     const std::string path = path_;
@@ -478,86 +200,6 @@ TEST_F(IpcFault, ATaskEndedAtAnyPointOfAQueueCallLeavesNothingBehind) {
     // 1 ms; the figure above is what this machine did; a loaded machine
     // must not fail the test).
     EXPECT_LT(board->worst_ns, 500'000'000ull);
-    munmap(board, sizeof(Board));
-}
-
-}  // namespace
-}  // namespace chm::test
-
-namespace chm::test {
-namespace {
-
-// The process kill at the same points: an RTPU child's task meets
-// CHIMERA_FAULT_AT=<point>:kill, $CHM_KILL_REPEATS times per point (100;
-// more in `make stress`); this process (a host) is the next user once the
-// dead slot is recovered. Express mail is left out here: its requests go
-// to the dying RTPU's own server.
-TEST_F(IpcFault, AnRtpuKilledAtAnyPointOfACallLeavesNothingBehind) {
-    auto* board = static_cast<Board*>(
-        mmap(nullptr, sizeof(Board), PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0));
-    ASSERT_NE(board, MAP_FAILED);
-    new (board) Board();
-    g_board = board;
-    create();
-    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
-    g_q = make_queue("fq", CHM_MSGQ_FIFO, 8, kDepth);
-    ASSERT_NE(g_q, nullptr);
-    ASSERT_EQ(chm_rsem_create("fs", CHM_SEM_COUNTING, 0, CHM_SHM_COMMON, &g_s), 0) << chm_bp_last_error();
-    void* seg = nullptr;
-    ASSERT_EQ(chm_shm_create("fseg", 256, CHM_SHM_COMMON, &seg), 0) << chm_bp_last_error();
-    g_refs = 1;  // the create's attach (the first check gives it back)
-    const int reps = kill_repeats();
-    std::vector<std::uint64_t> recovered, used;  // kill -> slot DEAD; the next user's call
-    for (const Case& c : kCases) {
-        if (!selected(c) || std::strncmp(c.point, "xmail.", 6) == 0) continue;
-        g_case = &c;
-        for (int rep = 0; rep < reps; ++rep) {
-            c.prepare();
-            const std::string path = path_;
-            const pid_t child = spawn([path, &c] {
-                char fault[96];
-                std::snprintf(fault, sizeof fault, "%s:kill", c.point);
-                setenv("CHIMERA_FAULT_AT", fault, 1);
-                stop::reload();
-                return run_rtpu(path, 1, [] {
-                    if (chm_msgq_open("fq", &g_q) || chm_rsem_open("fs", &g_s)) _exit(101);
-                    spawn_task([](void*) { g_case->victim(); }, nullptr, "victim", 20, 0);
-                });
-            });
-            ASSERT_EQ(reap(child), -SIGKILL) << c.point << " rep " << rep << ": the fault did not fire";
-            const std::uint64_t t0 = now_ns();
-            // Bounded generously: a loaded machine (sanitizers, a build
-            // beside) can take seconds to tear the killed process down.
-            chm_bp_status_t bs;
-            ASSERT_TRUE(wait_slot_state(1, CHM_BP_DEAD, 60000))
-                << c.point << " rep " << rep << ": slot 1 is in state "
-                << (chm_bp_status(&bs) == 0 ? int(bs.slot[1].state) : -1);
-            const std::uint64_t t1 = now_ns();
-            c.settle(Action(kActions));  // as an abort: the call never completed
-            const int r = c.next_user();
-            const std::uint64_t t2 = now_ns();
-            ASSERT_EQ(r, 0) << c.point << " rep " << rep << ": the next user's call: " << chm_bp_last_error();
-            recovered.push_back(t1 - t0);
-            used.push_back(t2 - t1);
-            const std::string wrong = c.verify();
-            ASSERT_EQ(wrong, "") << c.point << " rep " << rep;
-            ASSERT_EQ(check_now(), "") << c.point << " rep " << rep;
-        }
-        std::string out;
-        EXPECT_EQ(bpcheck(path_, &out), 0) << c.point << ":\n" << out;
-    }
-    auto median = [](std::vector<std::uint64_t> v) {
-        std::sort(v.begin(), v.end());
-        return v.empty() ? 0.0 : double(v[v.size() / 2]) / 1e3;
-    };
-    auto worst = [](const std::vector<std::uint64_t>& v) {
-        return v.empty() ? 0.0 : double(*std::max_element(v.begin(), v.end())) / 1e3;
-    };
-    std::printf("kill: %zu runs; reaped -> slot DEAD median %.0f us, worst %.0f us; next user median %.1f us, "
-                "worst %.1f us\n",
-                used.size(), median(recovered), worst(recovered), median(used), worst(used));
-    for (std::uint64_t u : used) EXPECT_LT(u, 500'000'000ull);  // far below the 5 s -EDEADLK
-    munmap(board, sizeof(Board));
 }
 
 }  // namespace

@@ -4,8 +4,6 @@
 // deadline handler's abort-cycle delivered at a wait; a processor
 // exception inside a call that returns to an error mark; a real bad user
 // buffer, which faults before the queue is locked.
-#include <sys/mman.h>
-
 #include <cstdint>
 #include <cstdio>
 #include <vector>
@@ -17,16 +15,15 @@
 #include "ipc/backplane/stop_point.hpp"
 #include "ipc/msgq/msgq.hpp"
 #include "ipc/xmail/xmail.hpp"
-#include "msgq_fixture.hpp"
+#include "fault_fixture.hpp"
 
 namespace chm::test {
 namespace {
 
-constexpr std::uint32_t kDepth = 4;  // the queue's capacity
 chm_msgq_t* g_q;
 chm_rsem_t* g_s;
 
-class IpcFaultPaths : public MsgqTest {};
+class IpcFaultPaths : public FaultTest {};
 
 }  // namespace
 }  // namespace chm::test
@@ -87,19 +84,14 @@ void destroyer(void*) {
 }
 
 TEST_F(IpcFaultPaths, ATaskParkedInACallIsDestroyedAtOnceLocallyAndByExpressMail) {
-    auto* rm = static_cast<Remote*>(
-        mmap(nullptr, sizeof(Remote), PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0));
-    ASSERT_NE(rm, MAP_FAILED);
-    new (rm) Remote();
+    SharedBlock<Remote> shared;
+    Remote* rm = shared.get();
+    ASSERT_NE(rm, nullptr);
     g_remote = rm;
-    chm_bp_config_t cfg = small_config();
-    cfg.ring_record_size = 1024;
-    create(cfg);
-    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
-    chm_msgq_t* q = make_queue("fq", CHM_MSGQ_FIFO, 8, kDepth);
-    ASSERT_NE(q, nullptr);
+    chm_msgq_t* q = nullptr;
+    ASSERT_NO_FATAL_FAILURE(attach_with_queue(&q, true));  // the RTPU child serves express mail
     chm_rsem_t* s = nullptr;
-    ASSERT_EQ(chm_rsem_create("fs", CHM_SEM_COUNTING, 0, CHM_SHM_COMMON, &s), 0) << chm_bp_last_error();
+    ASSERT_NO_FATAL_FAILURE(make_sem(&s));
     const std::string path = path_;
     const pid_t child = spawn([path] {
         return run_rtpu(path, 1, [] {
@@ -128,7 +120,6 @@ TEST_F(IpcFaultPaths, ATaskParkedInACallIsDestroyedAtOnceLocallyAndByExpressMail
     rm->stop = 1;
     EXPECT_EQ(reap(child), 0) << rm->failure;
     EXPECT_STREQ(rm->failure, "");
-    munmap(rm, sizeof(Remote));
 }
 
 }  // namespace
@@ -160,15 +151,12 @@ void late_receiver(void*) {
 }
 
 TEST_F(IpcFaultPaths, ADeadlineHandlersAbortCycleAtAWaitLetsTheCallCompleteFirst) {
-    auto* cy = static_cast<Cycle*>(
-        mmap(nullptr, sizeof(Cycle), PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0));
-    ASSERT_NE(cy, MAP_FAILED);
-    new (cy) Cycle();
+    SharedBlock<Cycle> shared;
+    Cycle* cy = shared.get();
+    ASSERT_NE(cy, nullptr);
     g_cycle = cy;
-    create();
-    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
-    chm_msgq_t* q = make_queue("fq", CHM_MSGQ_FIFO, 8, kDepth);
-    ASSERT_NE(q, nullptr);
+    chm_msgq_t* q = nullptr;
+    ASSERT_NO_FATAL_FAILURE(attach_with_queue(&q));
     const std::string path = path_;
     const pid_t child = spawn([path] {
         return run_rtpu(path, 1, [] {
@@ -206,7 +194,6 @@ TEST_F(IpcFaultPaths, ADeadlineHandlersAbortCycleAtAWaitLetsTheCallCompleteFirst
     EXPECT_EQ(in.received, 1u);
     EXPECT_EQ(in.receivers_waiting, 0u);
     EXPECT_EQ(check_now(), "");
-    munmap(cy, sizeof(Cycle));
 }
 
 }  // namespace
@@ -253,15 +240,12 @@ void marked_sender(void*) {
 }
 
 TEST_F(IpcFaultPaths, AReturnToAnErrorMarkFromInsideACallGivesItsLockBack) {
-    auto* mk = static_cast<Marked*>(
-        mmap(nullptr, sizeof(Marked), PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0));
-    ASSERT_NE(mk, MAP_FAILED);
-    new (mk) Marked();
+    SharedBlock<Marked> shared;
+    Marked* mk = shared.get();
+    ASSERT_NE(mk, nullptr);
     g_marked = mk;
-    create();
-    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
-    chm_msgq_t* q = make_queue("fq", CHM_MSGQ_FIFO, 8, kDepth);
-    ASSERT_NE(q, nullptr);
+    chm_msgq_t* q = nullptr;
+    ASSERT_NO_FATAL_FAILURE(attach_with_queue(&q));
     const std::string path = path_;
     const pid_t child = spawn([path] {
         return run_rtpu(path, 1, [] {
@@ -278,7 +262,6 @@ TEST_F(IpcFaultPaths, AReturnToAnErrorMarkFromInsideACallGivesItsLockBack) {
     for (std::uint32_t x; chm_msgq_try_receive(q, &x, sizeof x, nullptr) == int(sizeof x);) got.push_back(x);
     EXPECT_EQ(got, std::vector<std::uint32_t>{2});
     EXPECT_EQ(check_now(), "");
-    munmap(mk, sizeof(Marked));
 }
 
 }  // namespace
@@ -320,15 +303,12 @@ void bad_buffer_user(void*) {
 }
 
 TEST_F(IpcFaultPaths, ABadUserBufferFaultsBeforeTheQueueIsLocked) {
-    auto* bb = static_cast<BadBuf*>(
-        mmap(nullptr, sizeof(BadBuf), PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0));
-    ASSERT_NE(bb, MAP_FAILED);
-    new (bb) BadBuf();
+    SharedBlock<BadBuf> shared;
+    BadBuf* bb = shared.get();
+    ASSERT_NE(bb, nullptr);
     g_bad = bb;
-    create();
-    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
-    chm_msgq_t* q = make_queue("fq", CHM_MSGQ_FIFO, 8, kDepth);
-    ASSERT_NE(q, nullptr);
+    chm_msgq_t* q = nullptr;
+    ASSERT_NO_FATAL_FAILURE(attach_with_queue(&q));
     const std::string path = path_;
     const pid_t child = spawn([path] {
         return run_rtpu(path, 1, [] {
@@ -347,7 +327,6 @@ TEST_F(IpcFaultPaths, ABadUserBufferFaultsBeforeTheQueueIsLocked) {
     ASSERT_EQ(chm_msgq_info(q, &info), 0);
     EXPECT_EQ(info.count, 0u);
     EXPECT_EQ(check_now(), "");
-    munmap(bb, sizeof(BadBuf));
 }
 
 }  // namespace
@@ -397,10 +376,9 @@ void spin_unlocker(void*) {
 }
 
 TEST_F(IpcFaultPaths, AUserSpinLockUnlockedByAnotherTaskLeavesNoStaleHold) {
-    auto* sp = static_cast<Spin*>(
-        mmap(nullptr, sizeof(Spin), PROT_READ | PROT_WRITE, MAP_SHARED | MAP_ANONYMOUS, -1, 0));
-    ASSERT_NE(sp, MAP_FAILED);
-    new (sp) Spin();
+    SharedBlock<Spin> shared;
+    Spin* sp = shared.get();
+    ASSERT_NE(sp, nullptr);
     g_spin = sp;
     create();
     ASSERT_EQ(chm_bp_attach_host(path_.c_str(), nullptr, nullptr), 0);
@@ -425,7 +403,6 @@ TEST_F(IpcFaultPaths, AUserSpinLockUnlockedByAnotherTaskLeavesNoStaleHold) {
     // guards may be half changed): a user's spin-lock passes on owner-died.
     EXPECT_EQ(sp->next_user.load(), -EOWNERDEAD) << "the aborted task's second spin-lock was not passed on";
     EXPECT_EQ(check_now(), "");
-    munmap(sp, sizeof(Spin));
 }
 
 }  // namespace

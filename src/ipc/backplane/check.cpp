@@ -6,6 +6,7 @@
 #include <cstring>
 
 #include "ipc/backplane/backplane.hpp"
+#include "ipc/xmail/xmail.hpp"
 
 namespace chm::bp {
 
@@ -18,6 +19,27 @@ const char* state_name(std::uint32_t s) {
     return s < kStateCount ? kNames[s] : "?";
 }
 
+
+// A request of a sender that is dead or gone (claimed, written, posted, a
+// reply never read, set aside as stale) in ring `s`: its recovery or its
+// leave gives every such record up (xmail::withdraw), so one left holds a
+// record of the ring until that ring's server next wakes. Records being
+// served or abandoned are the ring's server's.
+void check_ring_records(const View& v, std::uint32_t s, Report& r) {
+    using namespace chm::xmail;
+    if (ring_record_size(v) < sizeof(Record)) return;  // no express mail on this backplane
+    RingHeader* ring = v.ring(s);
+    for (std::uint32_t i = 0; i < ring_capacity(v); ++i) {
+        const Record* rec = record_at(v, ring, i);
+        const Phase p = phase_of(rec->state.load(std::memory_order_acquire));
+        if (p != kWriting && p != kPosted && p != kReplied && p != kStale) continue;
+        const std::uint32_t owner = rec->owner.load(R);
+        if (token_alive(v, owner, true)) continue;
+        static const char* const kPhase[] = {"FREE", "WRITING", "POSTED", "SERVING", "REPLIED", "ABANDONED", "STALE"};
+        r.problem("ring[%u] record %u: %s, its sender (slot %u generation %u) is no live process: not given up", s, i,
+                  kPhase[p], token_slot(owner), token_gen(owner));
+    }
+}
 
 void check_table(const View& v, Report& r, Summary* sum) {
     char what[64];
@@ -63,6 +85,7 @@ void check_table(const View& v, Report& r, Summary* sum) {
                       v.geo().ring_records, v.geo().ring_record_size);
         std::snprintf(what, sizeof what, "ring[%u].lock", s);
         check_lock(v, ring->lock, what, r);
+        check_ring_records(v, s, r);
     }
 }
 

@@ -103,7 +103,22 @@ bool do_recover(const View& v, std::uint32_t slot, std::uint32_t gen) {
     }
     registry_unlock(v);
 
-    // 3. The slot itself: its name and kind stay for the status display.
+    // 3. Its express-mail requests in every ring, given up as a departing
+    //    process's are: claimed or WRITING -> FREE, being served ->
+    //    ABANDONED (that server frees it), a reply nobody will read ->
+    //    FREE. Else they held a record of a live ring until its server
+    //    next woke (or a sender found the ring full).
+    //    A ring lock it held mid-claim is released: every claim step
+    //    leaves a consistent record (xmail.hpp), so nothing to repair.
+    for (std::uint32_t s = 0; s < v.slots(); ++s) {
+        Lock* l = &v.ring(s)->lock;
+        if (!adopt(l, d, rt)) continue;
+        lock_clear_dirty(l);
+        lock_release(l);
+    }
+    chm::xmail::withdraw(v, d);
+
+    // 4. The slot itself: its name and kind stay for the status display.
     RtpuEntry* e = v.rtpu(slot);
     e->pid_start.store(0);
     e->pid.store(vacant_pid(gen), std::memory_order_release);

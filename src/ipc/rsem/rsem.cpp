@@ -1,8 +1,6 @@
-// Remote semaphores (chimera/rsem.h): a count and a table of waiter
-// records in backplane memory under one robust lock. A waiter parks on its
-// record's grant word (ipc/wake); V picks the most urgent record, stores
-// the grant under the lock and wakes it after. Recovery removes a dead
-// slot's records and passes on a grant it never took.
+// Remote semaphores (chimera/rsem.h): the calls. The layout and the
+// protocol are in rsem.hpp; the validation, the repair after a dirty lock,
+// the recovery of a dead slot and the checker in check.cpp.
 #include <cerrno>
 #include <cstdarg>
 #include <climits>
@@ -18,6 +16,7 @@
 #include "ipc/backplane/stop_point.hpp"
 #include "ipc/wake/wake.hpp"
 #include "ipc/err/report.hpp"
+#include "ipc/rsem/rsem.hpp"
 #include "kernel/sync/remote_wait.hpp"
 #include "kernel/task/holds.hpp"
 
@@ -26,50 +25,8 @@ using namespace chm::bp;
 struct chm_rsem;  // the handle is the shared object's address
 
 namespace chm::ipc {
+using namespace rsem;
 namespace {
-
-constexpr std::uint32_t kRsemMagic = 0x5253454d;  // "RSEM"
-enum WaiterState : std::uint32_t { kFree = 0, kWaiting = 1, kGranted = 2 };
-
-// Six words, so that the lock, the counters and record 0 fill one cache
-// line: a V that takes the lock has the usual single waiter's record too.
-struct Waiter {
-    A32 state;
-    A32 owner;    // make_token(slot, generation) of the waiting process
-    A32 prio;     // task priority (higher first); host threads 0
-    A32 seq;      // arrival, FIFO among equals
-    A32 task;     // the parked task's id (WaiterId); 0: the futex
-    A32 urgency;  // WaiterId::urgency
-};
-
-struct Rsem {
-    Lock lock;
-    A32 magic;
-    A32 kind;
-    A32 count;
-    A32 nwaiting;
-    A32 seq;
-    A32 broken;
-    Waiter w[CHM_RSEM_WAITERS];  // taken lowest index first
-    // The word record i's owner waits on, alone in its cache line: a
-    // granter's exchange then moves one line the waiter spins on, and
-    // reading the records does not take it from the spinner first.
-    struct GrantLine {
-        A32 word;
-        std::uint32_t pad[15];
-    } grant[CHM_RSEM_WAITERS];
-};
-static_assert(std::is_standard_layout_v<Rsem>);
-static_assert(offsetof(Rsem, w) + sizeof(Waiter) == 64, "lock, counters and record 0: one line");
-
-// The backplane's allocator aligns to 16 bytes; a semaphore takes 48 more
-// and starts at the first 64-byte boundary inside, the same in every
-// process (mappings are page-aligned).
-constexpr std::uint32_t kAllocSize = sizeof(Rsem) + 48;
-Rsem* rsem_at(void* allocation) {
-    const auto p = reinterpret_cast<std::uintptr_t>(allocation);
-    return reinterpret_cast<Rsem*>((p + 63) & ~std::uintptr_t(63));
-}
 
 Rsem* from_handle(chm_rsem_t* h) {
     Attachment* a = current();
@@ -78,53 +35,6 @@ Rsem* from_handle(chm_rsem_t* h) {
     if (p < a->base || p + kAllocSize > a->base + a->size) return nullptr;
     Rsem* s = rsem_at(h);
     return s->magic.load(std::memory_order_relaxed) == kRsemMagic ? s : nullptr;
-}
-
-
-// A semaphore's words that open checks: its kind, a binary count of at
-// most 1, every record's state and nwaiting against the records (V's
-// scan stops after nwaiting waiting records, so it must not exceed them).
-// The records themselves are a fixed array: nothing else indexes it.
-int validate_sem(const Rsem* s, char* why, std::size_t n) {
-    constexpr auto R = std::memory_order_relaxed;
-    const std::uint32_t kind = s->kind.load(R);
-    if (kind != CHM_SEM_BINARY && kind != CHM_SEM_COUNTING)
-        return corrupt(why, n, "kind is %u, not binary or counting", kind);
-    if (kind == CHM_SEM_BINARY && s->count.load(R) > 1) return corrupt(why, n, "count is %u in a binary semaphore", s->count.load(R));
-    // Only a quiescent semaphore's nwaiting is exact: the scan counts when
-    // the lock was free and nwaiting, count and seq unchanged from before
-    // it to after it (a P or V landing during the scan otherwise reads as
-    // corruption); else it is tried again, a few times, then not judged.
-    // seq because a grant and a new waiter in between bring nwaiting back
-    // to its value (seen under ThreadSanitizer's timing: "nwaiting is 1,
-    // 0 records wait"); every waiter that enqueues moves seq.
-    for (int attempt = 0; attempt < 8; ++attempt) {
-        const std::uint32_t token = s->lock.token.load(std::memory_order_acquire);
-        const std::uint32_t nwaiting = s->nwaiting.load(R), count = s->count.load(R), seq = s->seq.load(R);
-        std::uint32_t waiting = 0;
-        for (std::uint32_t i = 0; i < CHM_RSEM_WAITERS; ++i) {
-            const std::uint32_t st = s->w[i].state.load(R);
-            if (st > kGranted) return corrupt(why, n, "waiter %u: state %u is not FREE, WAITING or GRANTED", i, st);
-            waiting += st == kWaiting;
-        }
-        std::atomic_thread_fence(std::memory_order_acquire);
-        const bool stable = token == 0 && s->lock.token.load(R) == 0 && s->nwaiting.load(R) == nwaiting &&
-                            s->count.load(R) == count && s->seq.load(R) == seq;
-        if (!stable) continue;
-        if (nwaiting != waiting) return corrupt(why, n, "nwaiting is %u, %u records wait", nwaiting, waiting);
-        return 0;
-    }
-    return 0;
-}
-
-// Count the waiting records again: the repair after a holder died between
-// marking the lock dirty and clearing it.
-void repair_locked(Rsem* s) {
-    std::uint32_t n = 0;
-    for (Waiter& w : s->w)
-        if (w.state.load() == kWaiting) ++n;
-    s->nwaiting.store(n);
-    if (s->kind.load() == CHM_SEM_BINARY && s->count.load() > 1) s->count.store(1);
 }
 
 // How long a call waits for the semaphore's lock held by a live process
@@ -187,14 +97,6 @@ int lock(Rsem* s, LockWait wait = LockWait::kBlocking, std::uint64_t budget = 0)
 
 void unlock(Rsem* s) { lock_release(&s->lock); }
 
-std::uint32_t* grant_of(Rsem* s, const Waiter* w) {
-    return reinterpret_cast<std::uint32_t*>(&s->grant[w - s->w].word);
-}
-
-std::uint32_t owner_slot(const Waiter* w) { return token_slot(w->owner.load()); }
-
-WaiterId recorded(const Waiter* w) { return WaiterId{w->task.load(), w->urgency.load()}; }
-
 // The most urgent waiting record, or nullptr. Lock held. A record whose
 // process died or left (its token no longer live) is dropped on the way,
 // as message queues do: its recovery has not run yet, and a unit granted
@@ -221,10 +123,12 @@ Waiter* most_urgent_locked(Rsem* s) {
     return best;
 }
 
+}  // namespace
+
 // Give one unit: to the most urgent waiter (returned when it must be woken
 // after the unlock: not when its RTPU polls its word) or to the count.
 // Lock held.
-int give_locked(Rsem* s, Waiter** woken) {
+int rsem::give_locked(Rsem* s, Waiter** woken) {
     *woken = nullptr;
     if (Waiter* w = most_urgent_locked(s)) {
         constexpr auto R = std::memory_order_relaxed;
@@ -233,6 +137,7 @@ int give_locked(Rsem* s, Waiter** woken) {
         // Before the grant (whose exchange releases it): the waiter frees
         // its record after seeing the grant, without the lock.
         w->state.store(kGranted, R);
+        CHM_STOP_POINT("rsem.v.granted");  // mid-grant: GRANTED, its word not stored yet
         const bool watched = store_grant(grant_of(s, w), 1);
         lock_clear_dirty(&s->lock);
         if (!watched) *woken = w;
@@ -246,6 +151,8 @@ int give_locked(Rsem* s, Waiter** woken) {
     s->count.store(s->count.load(std::memory_order_relaxed) + 1, std::memory_order_relaxed);  // lock held: no RMW
     return 0;
 }
+
+namespace {
 
 // Unlock, then wake `woken` (give_locked's waiter, or nullptr): its slot
 // and identity are read while the lock still keeps its record.
@@ -282,93 +189,6 @@ void withdraw_abandoned(void* p, std::uint32_t index) {
 }
 
 }  // namespace
-
-// Recovery (with the registry lock held by `rt`): drop the dead slot's
-// records; a grant it never took goes to the next waiter or the count.
-// Listed in the backplane's built-in recovery table, so every survivor
-// recovers remote semaphores whether or not it uses them.
-void rsem_recover(const View& v, std::uint32_t index, std::uint32_t dead_slot, std::uint32_t dead_gen,
-             std::uint32_t rt) {
-    // The entry's offset is followed only once it is a block of its arena
-    // big enough for a semaphore, and the semaphore only when it is sound.
-    std::uint32_t off, size;
-    char why[200];
-    if (entry_payload(v, index, kAllocSize, &off, &size, why, sizeof why) != 0) return;
-    Rsem* s = rsem_at(v.at<char>(off));
-    if (s->magic.load() != kRsemMagic || validate_sem(s, why, sizeof why) != 0) return;
-    if (lock_acquire_recovery(v, &s->lock, rt) == -ETIMEDOUT) return;
-    if (s->lock.dirty.load()) repair_locked(s);
-    std::uint32_t passed = 0;
-    for (Waiter& w : s->w) {
-        if (w.owner.load() != make_token(dead_slot, dead_gen)) continue;
-        const std::uint32_t st = w.state.load();
-        if (st == kWaiting) s->nwaiting.fetch_sub(1);
-        if (st == kGranted) ++passed;
-        w.state.store(kFree);
-    }
-    lock_clear_dirty(&s->lock);
-    Waiter* to_wake[CHM_RSEM_WAITERS];
-    std::uint32_t n = 0;
-    for (; passed; --passed) {
-        Waiter* w = nullptr;
-        give_locked(s, &w);
-        if (w) to_wake[n++] = w;
-    }
-    lock_release(&s->lock);
-    for (std::uint32_t i = 0; i < n; ++i)
-        wake_granted(grant_of(s, to_wake[i]), owner_slot(to_wake[i]),
-                     recorded(to_wake[i]));
-}
-
-int rsem_validate(const View& v, std::uint32_t off, std::uint32_t size, const char* name, char* why, std::size_t n) {
-    char what[160];
-    int r = 0;
-    if (size < kAllocSize) {
-        std::snprintf(what, sizeof what, "size %u, smaller than a remote semaphore (%u)", size, kAllocSize);
-        r = kCorrupt;
-    } else if (const Rsem* s = rsem_at(v.at<char>(off)); s->magic.load(std::memory_order_relaxed) != kRsemMagic) {
-        std::snprintf(what, sizeof what, "magic is 0x%08x, expected 0x%08x", s->magic.load(std::memory_order_relaxed), kRsemMagic);
-        r = kCorrupt;
-    } else {
-        r = validate_sem(s, what, sizeof what);
-    }
-    if (r) std::snprintf(why, n, "%s: %s", name, what);
-    return r;
-}
-
-void rsem_check(const View& v, std::uint32_t off, std::uint32_t size, const char* name, Report& r) {
-    constexpr auto R = std::memory_order_relaxed;
-    if (size < kAllocSize) return r.problem("%s: %u bytes, smaller than a remote semaphore", name, size);
-    const Rsem* s = rsem_at(v.at<char>(off));
-    if (s->magic.load(R) != kRsemMagic) return r.problem("%s: no remote-semaphore magic", name);
-    const std::uint32_t kind = s->kind.load(R);
-    if (kind != CHM_SEM_BINARY && kind != CHM_SEM_COUNTING) return r.problem("%s: kind %u is not a semaphore kind", name, kind);
-    if (s->broken.load(R)) r.problem("%s: marked broken", name);
-    const std::uint32_t tok = s->lock.token.load(R);
-    if (tok && bp::token_alive(v, tok, true)) return;  // a live holder may be mid-change
-    char what[160];
-    std::snprintf(what, sizeof what, "%s.lock", name);
-    check_lock(v, s->lock, what, r);
-    const std::uint32_t count = s->count.load(R);
-    if (kind == CHM_SEM_BINARY && count > 1) r.problem("%s: binary, count %u", name, count);
-    std::uint32_t waiting = 0;
-    for (std::uint32_t i = 0; i < CHM_RSEM_WAITERS; ++i) {
-        const Waiter& w = s->w[i];
-        const std::uint32_t st = w.state.load(R);
-        if (st == kFree) continue;
-        if (st != kWaiting && st != kGranted) {
-            r.problem("%s: waiter %u has state %u", name, i, st);
-            continue;
-        }
-        waiting += st == kWaiting;
-        const std::uint32_t owner = w.owner.load(R), slot = token_slot(owner);
-        if (slot >= v.slots() || !token_alive(v, owner, true))
-            r.problem("%s: waiter %u (%s) belongs to slot %u generation %u, not a live process", name, i,
-                      st == kWaiting ? "waiting" : "granted", slot, owner & kGenMask);
-    }
-    if (s->nwaiting.load(R) != waiting) r.problem("%s: nwaiting %u, %u records waiting", name, s->nwaiting.load(R), waiting);
-    if (count > 0 && waiting > 0) r.problem("%s: count %u while %u waiters wait", name, count, waiting);
-}
 
 }  // namespace chm::ipc
 

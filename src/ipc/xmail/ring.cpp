@@ -223,6 +223,14 @@ int post(int rtpu, Kind kind, const void* req, std::uint32_t len, std::uint64_t 
             reclaimed = true;
             r = claim_locked(*a, ring, a->token, &seq);
         }
+        if (r) {
+            // The calling task holds the record from its claim on (until
+            // await or cancel gives it back): one that ends between here
+            // and the post gives it up, where before it stayed WRITING,
+            // then STALE, until the process left.
+            (void)kernel::hold_add(give_up_abandoned, r, seq);
+            CHM_STOP_POINT("xmail.claim.locked");  // claimed (WRITING), the ring lock still held
+        }
         bp::lock_release(&ring->lock);
         if (r) break;
         if (e->status.load(Acq) != st)
@@ -233,8 +241,6 @@ int post(int rtpu, Kind kind, const void* req, std::uint32_t len, std::uint64_t 
 
     // 2. Write and post. The record stays ours while we write: a reclaim
     // can only set it STALE (xmail.hpp), never hand it to another sender.
-    // The calling task holds it until await or cancel gives it back.
-    (void)kernel::hold_add(give_up_abandoned, r, seq);
     CHM_STOP_POINT("xmail.post.before_write");
     r->kind = kind;
     r->status = 0;
@@ -331,6 +337,7 @@ int call(int rtpu, Kind kind, const void* req, std::uint32_t len, void* reply, s
     kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     Pending p;
     if (int e = post(rtpu, kind, req, len, timeout_ns, &p)) return e;
+    CHM_STOP_POINT("xmail.request.posted");  // in flight: the server may be serving or have replied
     return await(&p, reply, cap, reply_len);
 }
 
