@@ -22,17 +22,24 @@
 #define SOAK_PAD_MAX (SOAK_MSG_MAX - 24)
 #define SOAK_OP_TIMEOUT_NS 200000000ull /* every blocking call: 200 ms */
 #define SOAK_SHM_WORDS 8
+/* State variables soak.v1 .. soak.vR (R = RTPUs): vectors of this many
+ * doubles, each element the number of values written (a torn read shows as
+ * unequal elements). The first task of RTPU r is the one writer of soak.vr;
+ * every worker reads them all. */
+#define SOAK_SVAR_ELEMS 8
+#define SOAK_SVAR_MAX 4
 /* Objects whose progress the driver watches: the queues, then these
  * (MAIL: some RTPU answered an express-mail ping). */
 #define SOAK_OBJ_SEM SOAK_QUEUES
 #define SOAK_OBJ_SHM (SOAK_QUEUES + 1)
 #define SOAK_OBJ_MAIL (SOAK_QUEUES + 2)
-#define SOAK_OBJECTS (SOAK_QUEUES + 3)
+#define SOAK_OBJ_SVAR (SOAK_QUEUES + 3) /* some writer wrote its state variable */
+#define SOAK_OBJECTS (SOAK_QUEUES + 4)
 
 /* What a worker was doing (op) and the in-flight states the driver reads
  * after a death. */
 enum soak_op { SOAK_OP_IDLE, SOAK_OP_SEND, SOAK_OP_RECV, SOAK_OP_PV, SOAK_OP_SHM_WRITE, SOAK_OP_SHM_READ,
-               SOAK_OP_PAUSE, SOAK_OP_PING, SOAK_OP_COUNT };
+               SOAK_OP_PAUSE, SOAK_OP_PING, SOAK_OP_SVAR_WRITE, SOAK_OP_SVAR_READ, SOAK_OP_COUNT };
 enum soak_send_state { SOAK_SEND_IDLE, SOAK_SEND_PENDING };   /* pending: seq last_seq in the call */
 enum soak_sem_state { SOAK_SEM_IDLE, SOAK_SEM_P, SOAK_SEM_HELD, SOAK_SEM_V };
 enum soak_shm_state { SOAK_SHM_IDLE, SOAK_SHM_LOCKING, SOAK_SHM_WRITING, SOAK_SHM_UNLOCKING };
@@ -59,6 +66,12 @@ typedef struct soak_worker {
     uint64_t p_ok, p_timeouts, shm_writes, shm_reads, shm_busy;
     uint64_t pings_ok, pings_down, pings_late; /* answered; -EHOSTDOWN; -ETIMEDOUT or -EBUSY */
     uint64_t owner_dead, repairs;     /* spin-lock taken from a dead holder; seqlock repaired */
+    /* State variables: svar_writing is 1 around chm_svar_set_write (a
+     * death there leaves that write in doubt); svar_claims counts the
+     * incarnations that became soak.vr's writer (an RTPU's first task). */
+    uint32_t svar_writing, svar_pad;
+    uint64_t svar_writes, svar_reads, svar_retry, svar_claims;
+    uint64_t svar_torn, svar_back;    /* defects: a mixed vector; a value older than one seen before */
     uint64_t dups, torn, bad_msgs;    /* defects seen by this worker */
     uint64_t errors;                  /* unexpected statuses */
     int32_t last_err;

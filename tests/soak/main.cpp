@@ -19,6 +19,7 @@
 #include "chimera/bp.h"
 #include "chimera/shm.h"
 #include "chimera/spin.h"
+#include "chimera/svar.h"
 #include "soak.hpp"
 
 namespace soak {
@@ -76,7 +77,7 @@ int Driver::run() {
     c.rtpu_slots = 12;
     c.ring_records = 16;
     c.local_window_size = 64 * 1024;
-    c.common_size = 512 * 1024;
+    c.common_size = 1024 * 1024;  // the state-variable table takes half of it
     c.registry_capacity = 32;
     if (chm_bp_create(bp_.c_str(), &c) != 0 || chm_bp_attach_host(bp_.c_str(), "soak-driver", nullptr) != 0 ||
         !make_ledger(ledger_path_, workers, opt_.rtpus, opt_.sem_units, &led_)) {
@@ -98,6 +99,11 @@ int Driver::run() {
     if (!r) r = chm_shm_create("soak.shm", sizeof(soak_shm_t), CHM_SHM_COMMON, &shm);
     shm_ = static_cast<soak_shm_t*>(shm);
     if (!r) r = chm_spin_init(&shm_->lock);
+    for (unsigned k = 1; k <= opt_.rtpus && !r; ++k) {
+        const std::string name = "soak.v" + std::to_string(k);
+        chm_svar_decl_t d{name.c_str(), CHM_SVAR_DOUBLE, SOAK_SVAR_ELEMS, 1, "writes"};
+        r = chm_svar_declare(&d);
+    }
     if (r) {
         std::fprintf(stderr, "soak: creating the objects: %d %s\n", r, chm_bp_last_error());
         (void)!chm_bp_leave();  // a failed setup: nothing to check
@@ -138,10 +144,10 @@ int Driver::run() {
         per += (i ? ", " : "") + std::to_string(worst_per_worker_[i] / 1000000u);
     std::printf("soak: summary (seed %llu, %u s)\n", (unsigned long long)opt_.seed, opt_.seconds);
     std::printf("  kills %llu (RTPUs %llu, hosts %llu; of them while stopped %llu, while starting %llu), "
-                "SIGTERM stops %llu, SIGSTOP/SIGCONT %llu (while starting %llu), restarts %llu\n",
+                "SIGTERM stops %llu (of hosts %llu), SIGSTOP/SIGCONT %llu (while starting %llu), restarts %llu\n",
                 (unsigned long long)n_.kills, (unsigned long long)n_.kills_rtpu, (unsigned long long)n_.kills_host,
                 (unsigned long long)n_.kills_stopped, (unsigned long long)n_.kills_starting,
-                (unsigned long long)n_.terms, (unsigned long long)n_.stops, (unsigned long long)n_.stops_starting,
+                (unsigned long long)n_.terms, (unsigned long long)n_.terms_host, (unsigned long long)n_.stops, (unsigned long long)n_.stops_starting,
                 (unsigned long long)n_.restarts);
     std::printf("  operations %llu\n", (unsigned long long)ops);
     for (const auto& [k, v] : report_) std::printf("  %s: %s\n", k.c_str(), v.c_str());
@@ -152,10 +158,8 @@ int Driver::run() {
                 worst_.peer_stopped.empty() ? "" : (worst_.peer_stopped + " was stopped").c_str(),
                 (unsigned long long)(bound_ns_ / 1000000u), per.c_str(), (unsigned long long)n_.stall_samples,
                 worst_tick_gap_ / 1e6, worst_net_ / 1e6, host_stall_ / 1e6);
-    static const char* const objects[SOAK_OBJECTS] = {"soak.q0", "soak.q1", "soak.q2", "soak.sem", "soak.shm",
-                                                        "express mail"};
     std::printf("  longest time an object served nobody: %.1f ms (%s; bound %llu ms)\n", worst_obj_ns_ / 1e6,
-                objects[worst_obj_], (unsigned long long)(bound_ns_ / 1000000u));
+                object_name(worst_obj_), (unsigned long long)(bound_ns_ / 1000000u));
     std::printf("soak: %s (%zu failed checks)\n", failures_.empty() ? "PASSED" : "FAILED", failures_.size());
     return failures_.empty() ? 0 : 1;
 }

@@ -55,8 +55,9 @@ struct Proc {
 
 struct Counts {
     uint64_t kills = 0, kills_rtpu = 0, kills_host = 0, kills_stopped = 0, kills_starting = 0;
-    uint64_t terms = 0, stops = 0, stops_starting = 0, restarts = 0, actions = 0;
+    uint64_t terms = 0, terms_host = 0, stops = 0, stops_starting = 0, restarts = 0, actions = 0;
     uint64_t units_returned = 0, sem_doubt = 0, shm_doubt = 0, dead_bufs_partial = 0;
+    uint64_t svar_doubt[SOAK_SVAR_MAX + 1] = {};  // per soak.vr: writes a death left in doubt
     uint64_t stall_samples = 0;
 };
 
@@ -100,6 +101,7 @@ public:
     void quiesce();
     void drain_and_account();
     void check_sem_and_shm();
+    void check_svars();
     void check_file_and_leftovers();
 
     void failure(const std::string& what);
@@ -138,9 +140,16 @@ public:
 
 uint64_t now_ns();
 extern volatile int g_interrupted;  // SIGINT, SIGTERM or SIGHUP arrived: clean up and fail
+inline const char* object_name(unsigned k) {
+    static const char* const names[SOAK_OBJECTS] = {"soak.q0",  "soak.q1",      "soak.q2",
+                                                    "soak.sem", "soak.shm",     "express mail",
+                                                    "soak.v*"};
+    return k < SOAK_OBJECTS ? names[k] : "?";
+}
 inline const char* op_name(uint32_t op) {
     static const char* const names[SOAK_OP_COUNT] = {"none",     "send",     "receive", "P/V",
-                                                     "shm write", "shm read", "pause",   "ping"};
+                                                     "shm write", "shm read", "pause",   "ping",
+                                                     "svar write", "svar read"};
     return op < SOAK_OP_COUNT ? names[op] : "?";
 }
 void nap_ms(unsigned ms);
