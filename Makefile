@@ -118,7 +118,8 @@ stress: deps $(BUILD)/build.ninja
 # a seed from the clock; the seed is printed, and the same seed replays the
 # same sequence of actions (their timing follows the machine).
 soak: deps $(BUILD)/build.ninja
-	meson compile -C $(BUILD) chimera-soak chimera-soak-host soak_worker chimera-rtpu chimera-bpcheck
+	meson compile -C $(BUILD) chimera-soak chimera-soak-host soak_worker chimera-soak-servo soak_mod_hand soak_mod_solo \
+	    chimera-rtpu chimera-bpcheck
 	$(BUILD)/tests/soak/chimera-soak --seconds $(SOAK_SECONDS) --seed $(SOAK_SEED)
 
 test-native: deps deps-bench $(BUILD)/build.ninja

@@ -143,6 +143,7 @@ void Driver::tick(bool chaos) {
         }
     }
     watch_stalls();
+    watch_servo();
     if (chaos) watch_objects();
     if (chaos && now >= next_action_) {
         act();

@@ -29,6 +29,7 @@ void Driver::finish() {
     drain_and_account();
     check_sem_and_shm();
     check_svars();
+    check_servo();
     check_file_and_leftovers();
 }
 
@@ -39,6 +40,7 @@ void Driver::abandon() {
         int st = 0;
         if (p.pid > 0 && kill(p.pid, SIGKILL) == 0) reap(p, 5000, &st);
     }
+    if (servo_pid_ > 0 && kill(servo_pid_, SIGKILL) == 0) waitpid(servo_pid_, nullptr, 0);
     (void)!chm_bp_leave();
     chm::test::remove_private_dir(dir_);
     failure("interrupted by a signal: workers killed, " + dir_ + " removed, nothing checked");
@@ -58,6 +60,7 @@ void Driver::quiesce() {
     }
     for (Proc& p : procs_)
         if (p.state != Proc::Up) failure(p.name() + " was not up again 30 s after the chaos ended");
+    stop_servo();  // while every RTPU is up: its modules off and killed, control given back
     for (unsigned i = 0; i < led_->workers; ++i) __atomic_store_n(&led_->w[i].quit, 1u, __ATOMIC_SEQ_CST);
     const uint64_t done_by = now_ns() + 10000000000ull;
     for (Proc& p : procs_) {

@@ -80,12 +80,37 @@ typedef struct soak_worker {
     soak_msg_t rbuf;                  /* receive buffer: valid while magic is set */
 } soak_worker_t;
 
+/* The servo controller (servo_main.c): a host process the chaos spares;
+ * it keeps modules on RTPUs 1..3 and switches them (modlog.h). */
+enum soak_servo_call { SOAK_SV_IDLE, SOAK_SV_TAKE, SOAK_SV_SPAWN, SOAK_SV_STATUS, SOAK_SV_SWITCH, SOAK_SV_KILL,
+                       SOAK_SV_CALLS };
+typedef struct soak_servo {
+    uint32_t quit, started, done, call; /* call: enum soak_servo_call under way */
+    uint64_t hb_ns;                     /* the end of its last call */
+    uint64_t takes, spawns, kills;
+    uint64_t handovers, solo_switches, first_on;  /* switches that returned 0, by kind */
+    uint64_t refused_late, refused_busy, refused_gone; /* -ETIME; -EALREADY/-EBUSY; RTPU or module gone */
+    uint64_t checked_done, checked_nothing, unverifiable; /* after a switch: everywhere / nowhere / could not tell */
+    uint64_t dead_seen, dead_seen_worst_ns; /* modules found DEAD or gone; the longest call that said so */
+    uint64_t errors_cleared;            /* modules found in ERROR and cleared */
+    uint64_t calls, worst_call_ns;
+    uint32_t worst_call;                /* enum soak_servo_call of worst_call_ns */
+    uint32_t hand_reads, hand_torn;     /* chm_svar_get of soak.hand: whole values? */
+    uint64_t defects;                   /* a switch half done, two modules writing one variable... */
+    uint64_t errors;                    /* unexpected statuses */
+    int32_t last_err;
+    uint32_t pad;
+    char last_err_text[240];
+    char last_defect[240];
+} soak_servo_t;
+
 typedef struct soak_ledger {
     uint32_t magic, workers;
     uint32_t sem_units; /* soak.sem's initial count */
     uint32_t rtpus;     /* RTPUs 1..rtpus, the targets of pings */
     uint64_t ok_ns[SOAK_OBJECTS]; /* CLOCK_MONOTONIC of each object's last successful operation */
     soak_worker_t w[SOAK_MAX_WORKERS];
+    soak_servo_t servo;
 } soak_ledger_t;
 
 #define SOAK_BITMAP_BYTES (SOAK_SEQ_CAP / 8)

@@ -104,6 +104,7 @@ int Driver::run() {
         chm_svar_decl_t d{name.c_str(), CHM_SVAR_DOUBLE, SOAK_SVAR_ELEMS, 1, "writes"};
         r = chm_svar_declare(&d);
     }
+    if (!r) r = servo_objects();
     if (r) {
         std::fprintf(stderr, "soak: creating the objects: %d %s\n", r, chm_bp_last_error());
         (void)!chm_bp_leave();  // a failed setup: nothing to check
@@ -129,6 +130,7 @@ int Driver::run() {
     }
     t0_ = now_ns();
     for (Proc& p : procs_) start(p);
+    start_servo();
     chaos_phase();
     if (g_interrupted) {
         abandon();
@@ -172,7 +174,8 @@ namespace {
     std::fprintf(stderr,
                  "chimera-soak: %s\n"
                  "usage: chimera-soak [--seconds N] [--seed N] [--rtpus N] [--hosts N] [--quiet]\n"
-                 "                    [--rtpu-bin PATH] [--host-bin PATH] [--worker PATH] [--bpcheck PATH]\n",
+                 "                    [--rtpu-bin PATH] [--host-bin PATH] [--worker PATH] [--bpcheck PATH]\n"
+                 "                    [--servo-bin PATH]\n",
                  why);
     std::exit(2);
 }
@@ -209,6 +212,7 @@ int main(int argc, char** argv) {
         else if (a == "--host-bin") o.host_bin = v;
         else if (a == "--worker") o.worker_so = v;
         else if (a == "--bpcheck") o.bpcheck_bin = v;
+        else if (a == "--servo-bin") o.servo_bin = v;
         else usage(("unknown option " + a).c_str());
     }
     if (2 * o.rtpus + o.hosts > SOAK_MAX_WORKERS) usage("more than 8 workers (two per RTPU, one per host)");

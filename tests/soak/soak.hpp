@@ -17,6 +17,7 @@
 
 extern "C" {
 #include "ledger.h"
+#include "modlog.h"
 #include "worker.h"
 }
 
@@ -32,7 +33,8 @@ struct Options {
     unsigned gap_min_ms = 100, gap_max_ms = 500; // between chaos actions
     // The programs it runs; meson builds the paths in (soak/meson.build).
     std::string rtpu_bin = SOAK_RTPU_BIN, host_bin = SOAK_HOST_BIN, worker_so = SOAK_WORKER_SO,
-                bpcheck_bin = SOAK_BPCHECK_BIN;
+                bpcheck_bin = SOAK_BPCHECK_BIN, servo_bin = SOAK_SERVO_BIN, mod_hand_so = SOAK_MOD_HAND_SO,
+                mod_solo_so = SOAK_MOD_SOLO_SO;
     bool quiet = false;
 };
 
@@ -95,6 +97,13 @@ public:
     std::string log_tail(const Proc& p) const;
     void watch_objects();
 
+    // servo.cpp
+    int servo_objects();
+    void start_servo();
+    void watch_servo();
+    void stop_servo();
+    void check_servo();
+
     // finish.cpp
     void finish();
     void abandon();
@@ -115,6 +124,8 @@ public:
     chm_msgq_t* q_[SOAK_QUEUES] = {};
     chm_rsem_t* sem_ = nullptr;
     soak_shm_t* shm_ = nullptr;
+    soak_modlog_t* mlog_ = nullptr;  // null: no servo controller (fewer than 3 RTPUs)
+    pid_t servo_pid_ = -1;
     uint64_t rng_ = 0, t0_ = 0, next_action_ = 0, last_tick_ = 0, worst_tick_gap_ = 0;
     uint64_t bound_ns_ = 0;
     Counts n_;
