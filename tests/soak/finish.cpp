@@ -133,6 +133,7 @@ void Driver::drain_and_account() {
         }
     }
     uint64_t sent = 0, received = 0, lost = 0, phantom = 0, doubt = 0, doubt_arrived = 0, dups = driver_dups;
+    uint64_t v_busy = 0;
     uint64_t torn = 0, bad_w = bad, errors = 0, pv = 0, ping_ok = 0, ping_down = 0, ping_late = 0;
     std::string first_lost, first_phantom;
     for (unsigned s = 0; s < led_->workers; ++s) {
@@ -142,6 +143,7 @@ void Driver::drain_and_account() {
         bad_w += w.bad_msgs;
         errors += w.errors;
         pv += w.p_ok;
+        v_busy += w.v_busy;
         ping_ok += w.pings_ok;
         ping_down += w.pings_down;
         ping_late += w.pings_late;
@@ -179,7 +181,7 @@ void Driver::drain_and_account() {
     report_["messages_lost"] = num(lost);
     report_["messages_phantom"] = num(phantom);
     report_["messages_duplicated"] = num(dups);
-    report_["pv_cycles"] = num(pv);
+    report_["pv_cycles"] = num(pv) + " (V called again after -EBUSY " + num(v_busy) + " times)";
     report_["pings"] = num(ping_ok) + " answered, " + num(ping_down) + " target down, " + num(ping_late) +
                        " target late (stopped)";
     report_["unexpected_statuses"] = num(errors);

@@ -64,6 +64,7 @@ typedef struct soak_worker {
     uint64_t op_count[SOAK_OP_COUNT]; /* completed, by kind */
     uint64_t sends_ok, send_timeouts, recvs_ok, recv_timeouts;
     uint64_t p_ok, p_timeouts, shm_writes, shm_reads, shm_busy;
+    uint64_t v_busy;                  /* V refused with -EBUSY (lock held 10 ms by a live peer) and called again */
     uint64_t pings_ok, pings_down, pings_late; /* answered; -EHOSTDOWN; -ETIMEDOUT or -EBUSY */
     uint64_t owner_dead, repairs;     /* spin-lock taken from a dead holder; seqlock repaired */
     /* State variables: svar_writing is 1 around chm_svar_set_write (a
@@ -108,6 +109,7 @@ typedef struct soak_ledger {
     uint32_t magic, workers;
     uint32_t sem_units; /* soak.sem's initial count */
     uint32_t rtpus;     /* RTPUs 1..rtpus, the targets of pings */
+    uint32_t layout;    /* sizeof(soak_ledger_t) as the driver built it: a stale worker binary refuses */
     uint64_t ok_ns[SOAK_OBJECTS]; /* CLOCK_MONOTONIC of each object's last successful operation */
     soak_worker_t w[SOAK_MAX_WORKERS];
     soak_servo_t servo;

@@ -51,6 +51,7 @@ bool make_ledger(const std::string& path, unsigned workers, unsigned rtpus, unsi
     l->workers = workers;
     l->sem_units = units;
     l->rtpus = rtpus;
+    l->layout = sizeof(soak_ledger_t);
     *out = l;
     return true;
 }

@@ -328,6 +328,9 @@ int main(int argc, char** argv) {
     void* map = fd < 0 ? MAP_FAILED : mmap(NULL, SOAK_LEDGER_SIZE, PROT_READ | PROT_WRITE, MAP_SHARED, fd, 0);
     if (fd >= 0) close(fd);
     if (map == MAP_FAILED) return fprintf(stderr, "chimera-soak-servo: %s: %s\n", argv[2], strerror(errno)), 1;
+    if (((soak_ledger_t*)map)->layout != sizeof(soak_ledger_t))
+        return fprintf(stderr, "chimera-soak-servo: ledger layout %u bytes, this build %zu: rebuild\n",
+                       ((soak_ledger_t*)map)->layout, sizeof(soak_ledger_t)), 1;
     sv = &((soak_ledger_t*)map)->servo;
     rng = (strtoull(argv[5], NULL, 10) * 0x9E3779B97F4A7C15ull) | 1u;
     int r = chm_bp_attach_host(argv[1], "soak-servo", NULL);

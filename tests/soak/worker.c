@@ -161,7 +161,11 @@ static void do_pv(ctx_t* c) {
     progress(c, SOAK_OBJ_SEM);
     nap_us(rnd(c) % 2000); /* hold the unit a while: others wait for it */
     ST(me->sem_state, SOAK_SEM_V);
-    r = chm_rsem_v(c->sem);
+    /* -EBUSY: a live peer (a stopped one) held the lock 10 ms and the unit
+     * was not given; rsem.h says call again, and the unit is ours until a
+     * V takes it. A stop lasts at most a second: 30 s is a defect. */
+    const uint64_t until = now_ns() + 30000000000ull;
+    while ((r = chm_rsem_v(c->sem)) == -EBUSY && now_ns() < until) ++me->v_busy;
     if (r != 0) fail(c, r, SOAK_OP_PV);
     ST(me->sem_state, SOAK_SEM_IDLE);
 }
@@ -369,6 +373,9 @@ int soak_worker_run(const char* ledger_path, unsigned id, uint32_t inc, uint64_t
     ctx_t c;
     memset(&c, 0, sizeof c);
     c.l = (soak_ledger_t*)map;
+    if (c.l->layout != sizeof(soak_ledger_t))
+        return fprintf(stderr, "soak worker %u: ledger layout %u bytes, this build %zu: rebuild\n", id, c.l->layout,
+                       sizeof(soak_ledger_t)), 1;
     if (id >= c.l->workers) return fprintf(stderr, "soak worker %u: only %u workers\n", id, c.l->workers), 1;
     c.me = &c.l->w[id];
     c.id = id;
