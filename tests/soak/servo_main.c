@@ -45,6 +45,7 @@ typedef struct role {
 } role_t;
 
 static soak_servo_t* sv;
+static uint64_t busy_since; /* the first of the refusals as busy in a row, 0 none */
 static int controlled[SOAK_MOD_ROLES + 1];
 static uint64_t rng, call_t0;
 
@@ -247,11 +248,22 @@ static void do_switch(role_t* off, role_t* on, uint64_t* kind) {
     end();
     if (r == 0) {
         ++*kind;
+        busy_since = 0;
         check_done(off, on, t);
         return;
     }
+    if (r != -EALREADY && r != -EBUSY) busy_since = 0;
     if (r == -ETIME) ++sv->refused_late; /* a commit came too late: nothing switched anywhere */
-    else if (r == -EALREADY || r == -EBUSY) ++sv->refused_busy;
+    else if (r == -EALREADY || r == -EBUSY) {
+        /* A module still finishing its last switch, or a ring full: brief.
+         * Refused so for 10 s in a row, a module is stuck. */
+        ++sv->refused_busy;
+        if (!busy_since) busy_since = now_ns();
+        else if (now_ns() - busy_since > 10000000000ull) {
+            defect("switches refused as busy for 10 s in a row, the last: %d %s", r, chm_err_last());
+            busy_since = 0;
+        }
+    }
     else if (transient(r)) ++sv->refused_gone;
     else {
         unexpected(r, "switch", on ? on->name : off->name);
