@@ -1,6 +1,7 @@
 // chimera-soak: the chaos soak (`make soak`, suite `soak`; docs/backplane.md,
 // "Chaos soak"). On a private backplane file, RTPUs and host processes
-// exchange messages, semaphore units and a seqlock-protected block while
+// exchange messages, semaphore units, a seqlock-protected block and state
+// variables, and a servo controller switches modules on the RTPUs, while
 // this driver kills, stops/continues, terminates and restarts them at
 // random; then it stops everything in order and checks the accounting,
 // the checker's verdict on the file and that nothing is left behind.
