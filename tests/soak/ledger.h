@@ -94,6 +94,7 @@ typedef struct soak_servo {
     uint64_t checked_done, checked_nothing, unverifiable; /* after a switch: everywhere / nowhere / could not tell */
     uint64_t dead_seen, dead_seen_worst_ns; /* modules found DEAD or gone; the longest call that said so */
     uint64_t errors_cleared;            /* modules found in ERROR and cleared */
+    uint64_t both_on_settled;           /* A and B both ON by their statuses, then the handed-over one OFF */
     uint64_t calls, worst_call_ns;
     uint32_t worst_call;                /* enum soak_servo_call of worst_call_ns */
     uint32_t hand_reads, hand_torn;     /* chm_svar_get of soak.hand: whole values? */

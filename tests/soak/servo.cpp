@@ -3,6 +3,7 @@
 // the chaos), its end, and the checks on what it and its modules did.
 #include <cerrno>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 
 #include <fcntl.h>
@@ -101,6 +102,11 @@ void Driver::check_servo() {
     if (!mlog_) return;
     const soak_servo_t& s = led_->servo;
     if (s.defects) failure(num(s.defects) + " servo defects, the last: " + s.last_defect);
+    // For diagnosis (the directory goes at the end): the controller's log,
+    // every switch and every time A and B both showed ON.
+    if (const char* keep = std::getenv("SOAK_KEEP_SERVO_LOG"))
+        if (std::system(("cp " + dir_ + "/servo.log '" + keep + "'").c_str()) != 0)
+            std::fprintf(stderr, "soak: could not copy the servo log to %s\n", keep);
     if (s.errors) failure("servo controller: " + num(s.errors) + " unexpected statuses, the last: " + s.last_err_text);
     if (s.worst_call_ns > bound_ns_)
         failure(std::string("a servo call took ") + num(s.worst_call_ns / 1000000u) + " ms (" +
@@ -129,7 +135,8 @@ void Driver::check_servo() {
                        num(s.solo_switches) + " solo on/off; refused and retried: " + num(s.refused_late) +
                        " -ETIME, " + num(s.refused_busy) + " busy, " + num(s.refused_gone) +
                        " RTPU or module gone; checked everywhere " + num(s.checked_done) + ", nowhere " +
-                       num(s.checked_nothing) + ", could not tell " + num(s.unverifiable);
+                       num(s.checked_nothing) + ", could not tell " + num(s.unverifiable) +
+                       "; A and B both ON by status, then one OFF within 10 s: " + num(s.both_on_settled);
     report_["servo_modules"] = num(s.spawns) + " spawns, " + num(s.takes) + " takes, " + num(s.dead_seen) +
                                " found DEAD or gone (longest such call " + num(s.dead_seen_worst_ns / 1000000u) +
                                " ms), " + num(s.errors_cleared) + " cleared from ERROR, " + num(s.kills) +
