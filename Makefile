@@ -111,14 +111,16 @@ stress: deps $(BUILD)/build.ninja
 	CHM_DIFF_SEED=0 CHM_DIFF_SETS=20000 $(BUILD)/tests/kernel/test_kernel_sched_diff --gtest_filter='Policies/*'
 
 # The chaos soak (tests/soak, docs/backplane.md "Chaos soak"): 3 RTPUs and
-# 2 host processes exchanging messages, semaphore units, a seqlock block
-# and express mail on a private backplane while they are killed, stopped/continued,
-# terminated and restarted at random for SOAK_SECONDS (600); then the
+# 2 host processes exchanging messages, semaphore units, a seqlock block,
+# state variables and express mail on a private backplane, and a servo
+# controller switching control modules on the RTPUs, while they are killed,
+# stopped/continued, terminated and restarted at random for SOAK_SECONDS (600); then the
 # accounting, the checker and a search for anything left. SOAK_SEED=0 takes
 # a seed from the clock; the seed is printed, and the same seed replays the
 # same sequence of actions (their timing follows the machine).
 soak: deps $(BUILD)/build.ninja
-	meson compile -C $(BUILD) chimera-soak chimera-soak-host soak_worker chimera-rtpu chimera-bpcheck
+	meson compile -C $(BUILD) chimera-soak chimera-soak-host soak_worker chimera-soak-servo soak_mod_hand soak_mod_solo \
+	    chimera-rtpu chimera-bpcheck
 	$(BUILD)/tests/soak/chimera-soak --seconds $(SOAK_SECONDS) --seed $(SOAK_SEED)
 
 test-native: deps deps-bench $(BUILD)/build.ninja

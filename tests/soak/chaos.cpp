@@ -143,6 +143,7 @@ void Driver::tick(bool chaos) {
         }
     }
     watch_stalls();
+    watch_servo();
     if (chaos) watch_objects();
     if (chaos && now >= next_action_) {
         act();
@@ -171,8 +172,11 @@ void Driver::act() {
     ++n_.actions;
     if ((p.state == Proc::Up || p.state == Proc::Starting) && !stopped && k < 40) {
         do_stop(p);
-    } else if (p.state == Proc::Up && p.rtpu && k >= 80) {
-        kill(p.pid, SIGTERM);  // graceful: the RTPU leaves with its task inside a call
+    } else if (p.state == Proc::Up && k >= 80) {
+        // Graceful: an RTPU leaves with its tasks inside a call (the stop
+        // protocol); a host worker ends its operation under way and leaves.
+        kill(p.pid, SIGTERM);
+        n_.terms_host += !p.rtpu;
         p.state = Proc::Terminating;
         p.since = now_ns();
         p.killed = true;
@@ -255,14 +259,6 @@ void Driver::watch_stalls() {
     }
 }
 
-namespace {
-const char* object_name(unsigned k) {
-    static const char* const names[SOAK_OBJECTS] = {"soak.q0", "soak.q1", "soak.q2", "soak.sem", "soak.shm",
-                                                        "express mail"};
-    return names[k];
-}
-}  // namespace
-
 // Every object must serve someone within the bound: a queue a send or a
 // receive, soak.sem a P, soak.shm a write. A worker's own heartbeat would
 // not show an object nobody can use any more (a lock never taken over, a
@@ -280,7 +276,9 @@ void Driver::watch_objects() {
     if (!rtpu_up) mail_floor_ = now;
     for (unsigned k = 0; k < SOAK_OBJECTS; ++k) {
         const uint64_t ok = __atomic_load_n(&led_->ok_ns[k], __ATOMIC_SEQ_CST);
-        const uint64_t floor = k == SOAK_OBJ_MAIL && mail_floor_ > obj_floor_ ? mail_floor_ : obj_floor_;
+        // Express mail and the state variables (written by RTPU tasks) need an RTPU up.
+        const bool needs_rtpu = k == SOAK_OBJ_MAIL || k == SOAK_OBJ_SVAR;
+        const uint64_t floor = needs_rtpu && mail_floor_ > obj_floor_ ? mail_floor_ : obj_floor_;
         const uint64_t from = ok > floor ? ok : floor;
         if (now <= from) continue;
         const uint64_t gap = now - from, host = excused(obj_seen_from_[k], obj_host_at_[k], from);

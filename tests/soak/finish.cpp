@@ -15,6 +15,7 @@
 #include "chimera/bp.h"
 #include "chimera/shm.h"
 #include "chimera/spin.h"
+#include "chimera/svar.h"
 #include "soak.hpp"
 
 namespace soak {
@@ -27,6 +28,8 @@ void Driver::finish() {
     quiesce();
     drain_and_account();
     check_sem_and_shm();
+    check_svars();
+    check_servo();
     check_file_and_leftovers();
 }
 
@@ -37,6 +40,7 @@ void Driver::abandon() {
         int st = 0;
         if (p.pid > 0 && kill(p.pid, SIGKILL) == 0) reap(p, 5000, &st);
     }
+    if (servo_pid_ > 0 && kill(servo_pid_, SIGKILL) == 0) waitpid(servo_pid_, nullptr, 0);
     (void)!chm_bp_leave();
     chm::test::remove_private_dir(dir_);
     failure("interrupted by a signal: workers killed, " + dir_ + " removed, nothing checked");
@@ -56,6 +60,7 @@ void Driver::quiesce() {
     }
     for (Proc& p : procs_)
         if (p.state != Proc::Up) failure(p.name() + " was not up again 30 s after the chaos ended");
+    stop_servo();  // while every RTPU is up: its modules off and killed, control given back
     for (unsigned i = 0; i < led_->workers; ++i) __atomic_store_n(&led_->w[i].quit, 1u, __ATOMIC_SEQ_CST);
     const uint64_t done_by = now_ns() + 10000000000ull;
     for (Proc& p : procs_) {
@@ -128,6 +133,7 @@ void Driver::drain_and_account() {
         }
     }
     uint64_t sent = 0, received = 0, lost = 0, phantom = 0, doubt = 0, doubt_arrived = 0, dups = driver_dups;
+    uint64_t v_busy = 0;
     uint64_t torn = 0, bad_w = bad, errors = 0, pv = 0, ping_ok = 0, ping_down = 0, ping_late = 0;
     std::string first_lost, first_phantom;
     for (unsigned s = 0; s < led_->workers; ++s) {
@@ -137,6 +143,7 @@ void Driver::drain_and_account() {
         bad_w += w.bad_msgs;
         errors += w.errors;
         pv += w.p_ok;
+        v_busy += w.v_busy;
         ping_ok += w.pings_ok;
         ping_down += w.pings_down;
         ping_late += w.pings_late;
@@ -174,7 +181,7 @@ void Driver::drain_and_account() {
     report_["messages_lost"] = num(lost);
     report_["messages_phantom"] = num(phantom);
     report_["messages_duplicated"] = num(dups);
-    report_["pv_cycles"] = num(pv);
+    report_["pv_cycles"] = num(pv) + " (V called again after -EBUSY " + num(v_busy) + " times)";
     report_["pings"] = num(ping_ok) + " answered, " + num(ping_down) + " target down, " + num(ping_late) +
                        " target late (stopped)";
     report_["unexpected_statuses"] = num(errors);
@@ -222,6 +229,52 @@ void Driver::check_sem_and_shm() {
                             ", lock taken from a dead holder " + num(owner_dead) + ", half-made writes finished " +
                             num(repairs) + ")";
     if (chm_spin_unlock(&shm_->lock) != 0) failure("soak.shm unlock at the end");
+}
+
+// The state variables soak.v1..R with every worker gone: no writer claim
+// left, one whole value, and that value (the writes of every incarnation
+// of its writer: each goes on from the last) between the writes confirmed
+// and those plus the writes a death left in doubt. Every incarnation of a
+// writer claimed its variable at once, a dead predecessor's claim
+// notwithstanding (a refusal is a worker error, reported above); no reader
+// saw a torn value or one older than it had seen.
+void Driver::check_svars() {
+    uint64_t writes = 0, reads = 0, retry = 0, claims = 0, torn = 0, back = 0, doubt = 0;
+    for (unsigned i = 0; i < led_->workers; ++i) {
+        const soak_worker_t& w = led_->w[i];
+        reads += w.svar_reads;
+        retry += w.svar_retry;
+        torn += w.svar_torn;
+        back += w.svar_back;
+    }
+    if (torn) failure(num(torn) + " torn reads of a state variable");
+    if (back) failure(num(back) + " reads of a state variable older than one the reader had seen");
+    std::string values;
+    for (unsigned k = 1; k <= opt_.rtpus; ++k) {
+        const std::string name = "soak.v" + std::to_string(k);
+        const soak_worker_t& w = led_->w[k - 1];
+        writes += w.svar_writes;
+        claims += w.svar_claims;
+        doubt += n_.svar_doubt[k];
+        double v[SOAK_SVAR_ELEMS] = {};
+        chm_svar_info_t info{};
+        const int r = chm_svar_get(name.c_str(), v, sizeof v), ri = chm_svar_info(name.c_str(), &info);
+        if (r || ri) {
+            failure(name + " at the end: status " + std::to_string(r ? r : ri) + " " + chm_bp_last_error());
+            continue;
+        }
+        if (info.has_writer) failure(name + " still has a writer after every worker ended: " + info.writer);
+        for (int e = 1; e < SOAK_SVAR_ELEMS; ++e)
+            if (v[e] != v[0]) failure(name + " is torn at the end: element " + std::to_string(e));
+        const uint64_t val = uint64_t(v[0]);
+        if (val < w.svar_writes || val > w.svar_writes + n_.svar_doubt[k])
+            failure(name + " holds " + num(val) + " writes; its writer confirmed " + num(w.svar_writes) +
+                    ", in doubt " + num(n_.svar_doubt[k]));
+        values += (values.empty() ? "" : ", ") + name + " " + num(val);
+    }
+    report_["svar"] = num(writes) + " writes (" + num(doubt) + " in doubt), " + num(reads) + " reads (" + num(retry) +
+                      " kept the old copy: -EAGAIN), " + num(claims) + " writer claims by new incarnations, " +
+                      num(torn) + " torn, " + num(back) + " backwards; at the end " + values;
 }
 
 // Leave the backplane, run chimera-bpcheck on the file at rest, remove the

@@ -1,17 +1,30 @@
 /* The chaos soak's worker as a host process (no kernel: its waits sleep on
  * futexes). argv: BACKPLANE LEDGER ID INCARNATION SEED. It attaches as a
- * host, runs worker.c's loop until told to quit and leaves. */
+ * host, runs worker.c's loop until told to quit and leaves. SIGTERM is its
+ * graceful stop: the operation under way (a bounded call) finishes, then
+ * it leaves the backplane and exits 0, as at quit. */
 #include <chimera/bp.h>
+#include <signal.h>
 #include <stdio.h>
 #include <stdlib.h>
 
 #include "worker.h"
+
+static void on_term(int sig) {
+    (void)sig;
+    soak_worker_stop = 1;
+}
 
 int main(int argc, char** argv) {
     if (argc != 6) {
         fprintf(stderr, "usage: chimera-soak-host BACKPLANE LEDGER ID INCARNATION SEED\n");
         return 2;
     }
+    struct sigaction sa;
+    sa.sa_handler = on_term;
+    sigemptyset(&sa.sa_mask);
+    sa.sa_flags = 0; /* no SA_RESTART: a sleep between operations ends at once */
+    sigaction(SIGTERM, &sa, NULL);
     char name[32];
     snprintf(name, sizeof name, "soak-host%s", argv[3]);
     const int r = chm_bp_attach_host(argv[1], name, NULL);

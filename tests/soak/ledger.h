@@ -22,17 +22,24 @@
 #define SOAK_PAD_MAX (SOAK_MSG_MAX - 24)
 #define SOAK_OP_TIMEOUT_NS 200000000ull /* every blocking call: 200 ms */
 #define SOAK_SHM_WORDS 8
+/* State variables soak.v1 .. soak.vR (R = RTPUs): vectors of this many
+ * doubles, each element the number of values written (a torn read shows as
+ * unequal elements). The first task of RTPU r is the one writer of soak.vr;
+ * every worker reads them all. */
+#define SOAK_SVAR_ELEMS 8
+#define SOAK_SVAR_MAX 4
 /* Objects whose progress the driver watches: the queues, then these
  * (MAIL: some RTPU answered an express-mail ping). */
 #define SOAK_OBJ_SEM SOAK_QUEUES
 #define SOAK_OBJ_SHM (SOAK_QUEUES + 1)
 #define SOAK_OBJ_MAIL (SOAK_QUEUES + 2)
-#define SOAK_OBJECTS (SOAK_QUEUES + 3)
+#define SOAK_OBJ_SVAR (SOAK_QUEUES + 3) /* some writer wrote its state variable */
+#define SOAK_OBJECTS (SOAK_QUEUES + 4)
 
 /* What a worker was doing (op) and the in-flight states the driver reads
  * after a death. */
 enum soak_op { SOAK_OP_IDLE, SOAK_OP_SEND, SOAK_OP_RECV, SOAK_OP_PV, SOAK_OP_SHM_WRITE, SOAK_OP_SHM_READ,
-               SOAK_OP_PAUSE, SOAK_OP_PING, SOAK_OP_COUNT };
+               SOAK_OP_PAUSE, SOAK_OP_PING, SOAK_OP_SVAR_WRITE, SOAK_OP_SVAR_READ, SOAK_OP_COUNT };
 enum soak_send_state { SOAK_SEND_IDLE, SOAK_SEND_PENDING };   /* pending: seq last_seq in the call */
 enum soak_sem_state { SOAK_SEM_IDLE, SOAK_SEM_P, SOAK_SEM_HELD, SOAK_SEM_V };
 enum soak_shm_state { SOAK_SHM_IDLE, SOAK_SHM_LOCKING, SOAK_SHM_WRITING, SOAK_SHM_UNLOCKING };
@@ -57,8 +64,15 @@ typedef struct soak_worker {
     uint64_t op_count[SOAK_OP_COUNT]; /* completed, by kind */
     uint64_t sends_ok, send_timeouts, recvs_ok, recv_timeouts;
     uint64_t p_ok, p_timeouts, shm_writes, shm_reads, shm_busy;
+    uint64_t v_busy;                  /* V refused with -EBUSY (lock held 10 ms by a live peer) and called again */
     uint64_t pings_ok, pings_down, pings_late; /* answered; -EHOSTDOWN; -ETIMEDOUT or -EBUSY */
     uint64_t owner_dead, repairs;     /* spin-lock taken from a dead holder; seqlock repaired */
+    /* State variables: svar_writing is 1 around chm_svar_set_write (a
+     * death there leaves that write in doubt); svar_claims counts the
+     * incarnations that became soak.vr's writer (an RTPU's first task). */
+    uint32_t svar_writing, svar_pad;
+    uint64_t svar_writes, svar_reads, svar_retry, svar_claims;
+    uint64_t svar_torn, svar_back;    /* defects: a mixed vector; a value older than one seen before */
     uint64_t dups, torn, bad_msgs;    /* defects seen by this worker */
     uint64_t errors;                  /* unexpected statuses */
     int32_t last_err;
@@ -67,12 +81,39 @@ typedef struct soak_worker {
     soak_msg_t rbuf;                  /* receive buffer: valid while magic is set */
 } soak_worker_t;
 
+/* The servo controller (servo_main.c): a host process the chaos spares;
+ * it keeps modules on RTPUs 1..3 and switches them (modlog.h). */
+enum soak_servo_call { SOAK_SV_IDLE, SOAK_SV_TAKE, SOAK_SV_SPAWN, SOAK_SV_STATUS, SOAK_SV_SWITCH, SOAK_SV_KILL,
+                       SOAK_SV_CALLS };
+typedef struct soak_servo {
+    uint32_t quit, started, done, call; /* call: enum soak_servo_call under way */
+    uint64_t hb_ns;                     /* the end of its last call */
+    uint64_t takes, spawns, kills;
+    uint64_t handovers, solo_switches, first_on;  /* switches that returned 0, by kind */
+    uint64_t refused_late, refused_busy, refused_gone; /* -ETIME; -EALREADY/-EBUSY; RTPU or module gone */
+    uint64_t checked_done, checked_nothing, unverifiable; /* after a switch: everywhere / nowhere / could not tell */
+    uint64_t dead_seen, dead_seen_worst_ns; /* modules found DEAD or gone; the longest call that said so */
+    uint64_t errors_cleared;            /* modules found in ERROR and cleared */
+    uint64_t both_on_settled;           /* A and B both ON by their statuses, then the handed-over one OFF */
+    uint64_t calls, worst_call_ns;
+    uint32_t worst_call;                /* enum soak_servo_call of worst_call_ns */
+    uint32_t hand_reads, hand_torn;     /* chm_svar_get of soak.hand: whole values? */
+    uint64_t defects;                   /* a switch half done, two modules writing one variable... */
+    uint64_t errors;                    /* unexpected statuses */
+    int32_t last_err;
+    uint32_t pad;
+    char last_err_text[240];
+    char last_defect[240];
+} soak_servo_t;
+
 typedef struct soak_ledger {
     uint32_t magic, workers;
     uint32_t sem_units; /* soak.sem's initial count */
     uint32_t rtpus;     /* RTPUs 1..rtpus, the targets of pings */
+    uint32_t layout;    /* sizeof(soak_ledger_t) as the driver built it: a stale worker binary refuses */
     uint64_t ok_ns[SOAK_OBJECTS]; /* CLOCK_MONOTONIC of each object's last successful operation */
     soak_worker_t w[SOAK_MAX_WORKERS];
+    soak_servo_t servo;
 } soak_ledger_t;
 
 #define SOAK_BITMAP_BYTES (SOAK_SEQ_CAP / 8)

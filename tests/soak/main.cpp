@@ -1,6 +1,7 @@
 // chimera-soak: the chaos soak (`make soak`, suite `soak`; docs/backplane.md,
 // "Chaos soak"). On a private backplane file, RTPUs and host processes
-// exchange messages, semaphore units and a seqlock-protected block while
+// exchange messages, semaphore units, a seqlock-protected block and state
+// variables, and a servo controller switches modules on the RTPUs, while
 // this driver kills, stops/continues, terminates and restarts them at
 // random; then it stops everything in order and checks the accounting,
 // the checker's verdict on the file and that nothing is left behind.
@@ -19,6 +20,7 @@
 #include "chimera/bp.h"
 #include "chimera/shm.h"
 #include "chimera/spin.h"
+#include "chimera/svar.h"
 #include "soak.hpp"
 
 namespace soak {
@@ -50,6 +52,7 @@ bool make_ledger(const std::string& path, unsigned workers, unsigned rtpus, unsi
     l->workers = workers;
     l->sem_units = units;
     l->rtpus = rtpus;
+    l->layout = sizeof(soak_ledger_t);
     *out = l;
     return true;
 }
@@ -76,7 +79,7 @@ int Driver::run() {
     c.rtpu_slots = 12;
     c.ring_records = 16;
     c.local_window_size = 64 * 1024;
-    c.common_size = 512 * 1024;
+    c.common_size = 1024 * 1024;  // the state-variable table takes half of it
     c.registry_capacity = 32;
     if (chm_bp_create(bp_.c_str(), &c) != 0 || chm_bp_attach_host(bp_.c_str(), "soak-driver", nullptr) != 0 ||
         !make_ledger(ledger_path_, workers, opt_.rtpus, opt_.sem_units, &led_)) {
@@ -98,6 +101,12 @@ int Driver::run() {
     if (!r) r = chm_shm_create("soak.shm", sizeof(soak_shm_t), CHM_SHM_COMMON, &shm);
     shm_ = static_cast<soak_shm_t*>(shm);
     if (!r) r = chm_spin_init(&shm_->lock);
+    for (unsigned k = 1; k <= opt_.rtpus && !r; ++k) {
+        const std::string name = "soak.v" + std::to_string(k);
+        chm_svar_decl_t d{name.c_str(), CHM_SVAR_DOUBLE, SOAK_SVAR_ELEMS, 1, "writes"};
+        r = chm_svar_declare(&d);
+    }
+    if (!r) r = servo_objects();
     if (r) {
         std::fprintf(stderr, "soak: creating the objects: %d %s\n", r, chm_bp_last_error());
         (void)!chm_bp_leave();  // a failed setup: nothing to check
@@ -123,6 +132,7 @@ int Driver::run() {
     }
     t0_ = now_ns();
     for (Proc& p : procs_) start(p);
+    start_servo();
     chaos_phase();
     if (g_interrupted) {
         abandon();
@@ -138,10 +148,10 @@ int Driver::run() {
         per += (i ? ", " : "") + std::to_string(worst_per_worker_[i] / 1000000u);
     std::printf("soak: summary (seed %llu, %u s)\n", (unsigned long long)opt_.seed, opt_.seconds);
     std::printf("  kills %llu (RTPUs %llu, hosts %llu; of them while stopped %llu, while starting %llu), "
-                "SIGTERM stops %llu, SIGSTOP/SIGCONT %llu (while starting %llu), restarts %llu\n",
+                "SIGTERM stops %llu (of hosts %llu), SIGSTOP/SIGCONT %llu (while starting %llu), restarts %llu\n",
                 (unsigned long long)n_.kills, (unsigned long long)n_.kills_rtpu, (unsigned long long)n_.kills_host,
                 (unsigned long long)n_.kills_stopped, (unsigned long long)n_.kills_starting,
-                (unsigned long long)n_.terms, (unsigned long long)n_.stops, (unsigned long long)n_.stops_starting,
+                (unsigned long long)n_.terms, (unsigned long long)n_.terms_host, (unsigned long long)n_.stops, (unsigned long long)n_.stops_starting,
                 (unsigned long long)n_.restarts);
     std::printf("  operations %llu\n", (unsigned long long)ops);
     for (const auto& [k, v] : report_) std::printf("  %s: %s\n", k.c_str(), v.c_str());
@@ -152,10 +162,8 @@ int Driver::run() {
                 worst_.peer_stopped.empty() ? "" : (worst_.peer_stopped + " was stopped").c_str(),
                 (unsigned long long)(bound_ns_ / 1000000u), per.c_str(), (unsigned long long)n_.stall_samples,
                 worst_tick_gap_ / 1e6, worst_net_ / 1e6, host_stall_ / 1e6);
-    static const char* const objects[SOAK_OBJECTS] = {"soak.q0", "soak.q1", "soak.q2", "soak.sem", "soak.shm",
-                                                        "express mail"};
     std::printf("  longest time an object served nobody: %.1f ms (%s; bound %llu ms)\n", worst_obj_ns_ / 1e6,
-                objects[worst_obj_], (unsigned long long)(bound_ns_ / 1000000u));
+                object_name(worst_obj_), (unsigned long long)(bound_ns_ / 1000000u));
     std::printf("soak: %s (%zu failed checks)\n", failures_.empty() ? "PASSED" : "FAILED", failures_.size());
     return failures_.empty() ? 0 : 1;
 }
@@ -168,7 +176,8 @@ namespace {
     std::fprintf(stderr,
                  "chimera-soak: %s\n"
                  "usage: chimera-soak [--seconds N] [--seed N] [--rtpus N] [--hosts N] [--quiet]\n"
-                 "                    [--rtpu-bin PATH] [--host-bin PATH] [--worker PATH] [--bpcheck PATH]\n",
+                 "                    [--rtpu-bin PATH] [--host-bin PATH] [--worker PATH] [--bpcheck PATH]\n"
+                 "                    [--servo-bin PATH]\n",
                  why);
     std::exit(2);
 }
@@ -205,6 +214,7 @@ int main(int argc, char** argv) {
         else if (a == "--host-bin") o.host_bin = v;
         else if (a == "--worker") o.worker_so = v;
         else if (a == "--bpcheck") o.bpcheck_bin = v;
+        else if (a == "--servo-bin") o.servo_bin = v;
         else usage(("unknown option " + a).c_str());
     }
     if (2 * o.rtpus + o.hosts > SOAK_MAX_WORKERS) usage("more than 8 workers (two per RTPU, one per host)");

@@ -126,6 +126,8 @@ void Driver::absorb_worker(const Proc& p, unsigned id) {
     w.sem_state = SOAK_SEM_IDLE;
     if (w.shm_state == SOAK_SHM_WRITING) ++n_.shm_doubt;  // that write may or may not count
     w.shm_state = SOAK_SHM_IDLE;
+    if (w.svar_writing && id < opt_.rtpus) ++n_.svar_doubt[id + 1];  // that value may or may not be out
+    w.svar_writing = 0;
     w.op = SOAK_OP_IDLE;
 }
 

@@ -17,6 +17,7 @@
 
 extern "C" {
 #include "ledger.h"
+#include "modlog.h"
 #include "worker.h"
 }
 
@@ -32,7 +33,8 @@ struct Options {
     unsigned gap_min_ms = 100, gap_max_ms = 500; // between chaos actions
     // The programs it runs; meson builds the paths in (soak/meson.build).
     std::string rtpu_bin = SOAK_RTPU_BIN, host_bin = SOAK_HOST_BIN, worker_so = SOAK_WORKER_SO,
-                bpcheck_bin = SOAK_BPCHECK_BIN;
+                bpcheck_bin = SOAK_BPCHECK_BIN, servo_bin = SOAK_SERVO_BIN, mod_hand_so = SOAK_MOD_HAND_SO,
+                mod_solo_so = SOAK_MOD_SOLO_SO;
     bool quiet = false;
 };
 
@@ -55,8 +57,9 @@ struct Proc {
 
 struct Counts {
     uint64_t kills = 0, kills_rtpu = 0, kills_host = 0, kills_stopped = 0, kills_starting = 0;
-    uint64_t terms = 0, stops = 0, stops_starting = 0, restarts = 0, actions = 0;
+    uint64_t terms = 0, terms_host = 0, stops = 0, stops_starting = 0, restarts = 0, actions = 0;
     uint64_t units_returned = 0, sem_doubt = 0, shm_doubt = 0, dead_bufs_partial = 0;
+    uint64_t svar_doubt[SOAK_SVAR_MAX + 1] = {};  // per soak.vr: writes a death left in doubt
     uint64_t stall_samples = 0;
 };
 
@@ -94,12 +97,20 @@ public:
     std::string log_tail(const Proc& p) const;
     void watch_objects();
 
+    // servo.cpp
+    int servo_objects();
+    void start_servo();
+    void watch_servo();
+    void stop_servo();
+    void check_servo();
+
     // finish.cpp
     void finish();
     void abandon();
     void quiesce();
     void drain_and_account();
     void check_sem_and_shm();
+    void check_svars();
     void check_file_and_leftovers();
 
     void failure(const std::string& what);
@@ -113,6 +124,8 @@ public:
     chm_msgq_t* q_[SOAK_QUEUES] = {};
     chm_rsem_t* sem_ = nullptr;
     soak_shm_t* shm_ = nullptr;
+    soak_modlog_t* mlog_ = nullptr;  // null: no servo controller (fewer than 3 RTPUs)
+    pid_t servo_pid_ = -1;
     uint64_t rng_ = 0, t0_ = 0, next_action_ = 0, last_tick_ = 0, worst_tick_gap_ = 0;
     uint64_t bound_ns_ = 0;
     Counts n_;
@@ -138,9 +151,16 @@ public:
 
 uint64_t now_ns();
 extern volatile int g_interrupted;  // SIGINT, SIGTERM or SIGHUP arrived: clean up and fail
+inline const char* object_name(unsigned k) {
+    static const char* const names[SOAK_OBJECTS] = {"soak.q0",  "soak.q1",      "soak.q2",
+                                                    "soak.sem", "soak.shm",     "express mail",
+                                                    "soak.v*"};
+    return k < SOAK_OBJECTS ? names[k] : "?";
+}
 inline const char* op_name(uint32_t op) {
     static const char* const names[SOAK_OP_COUNT] = {"none",     "send",     "receive", "P/V",
-                                                     "shm write", "shm read", "pause",   "ping"};
+                                                     "shm write", "shm read", "pause",   "ping",
+                                                     "svar write", "svar read"};
     return op < SOAK_OP_COUNT ? names[op] : "?";
 }
 void nap_ms(unsigned ms);

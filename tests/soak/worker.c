@@ -13,8 +13,10 @@
 #include <chimera/rsem.h>
 #include <chimera/shm.h>
 #include <chimera/spin.h>
+#include <chimera/svar.h>
 #include <errno.h>
 #include <fcntl.h>
+#include <signal.h>
 #include <stdio.h>
 #include <string.h>
 #include <sys/mman.h>
@@ -32,7 +34,13 @@ typedef struct ctx {
     chm_msgq_t* q[SOAK_QUEUES];
     chm_rsem_t* sem;
     soak_shm_t* shm;
+    chm_svar_set_t* vars;  /* inputs: every soak.vr but its own; output: its own (writers) */
+    int writes_var;        /* 1..R: the variable it writes, 0 none */
+    unsigned n_vars;
+    double seen[SOAK_SVAR_MAX + 1]; /* per variable: the newest value this incarnation saw */
 } ctx_t;
+
+volatile sig_atomic_t soak_worker_stop = 0;
 
 static uint64_t now_ns(void) {
     struct timespec ts;
@@ -55,8 +63,10 @@ static uint64_t timeout(ctx_t* c) {
     return k == 0 ? CHM_NO_WAIT : k == 3 ? SOAK_OP_TIMEOUT_NS : (1 + rnd(c) % 20) * 1000000ull;
 }
 
-/* Not done within its bound: the outcome a bounded call may have. */
-static int expired(int r) { return r == -ETIMEDOUT || r == -EAGAIN; }
+/* Not done within its bound: the outcome a bounded call may have. So is
+ * -EINTR once SIGTERM asked a host worker to stop (its handler interrupts
+ * the wait; the call did nothing, as a timeout); at no other time. */
+static int expired(int r) { return r == -ETIMEDOUT || r == -EAGAIN || (r == -EINTR && soak_worker_stop); }
 
 static void nap_us(uint64_t us) {
     struct timespec ts = {(time_t)(us / 1000000u), (long)(us % 1000000u) * 1000};
@@ -151,7 +161,11 @@ static void do_pv(ctx_t* c) {
     progress(c, SOAK_OBJ_SEM);
     nap_us(rnd(c) % 2000); /* hold the unit a while: others wait for it */
     ST(me->sem_state, SOAK_SEM_V);
-    r = chm_rsem_v(c->sem);
+    /* -EBUSY: a live peer (a stopped one) held the lock 10 ms and the unit
+     * was not given; rsem.h says call again, and the unit is ours until a
+     * V takes it. A stop lasts at most a second: 30 s is a defect. */
+    const uint64_t until = now_ns() + 30000000000ull;
+    while ((r = chm_rsem_v(c->sem)) == -EBUSY && now_ns() < until) ++me->v_busy;
     if (r != 0) fail(c, r, SOAK_OP_PV);
     ST(me->sem_state, SOAK_SEM_IDLE);
 }
@@ -242,11 +256,96 @@ static void do_ping(ctx_t* c) {
         progress(c, SOAK_OBJ_MAIL);
     } else if (r == -EHOSTDOWN) {
         ++me->pings_down;
-    } else if (r == -ETIMEDOUT || r == -EBUSY) {
+    } else if (r == -ETIMEDOUT || r == -EBUSY || (r == -EINTR && soak_worker_stop)) {
         ++me->pings_late;
     } else {
         fail(c, r, SOAK_OP_PING);
     }
+}
+
+static void svar_name(char* out, size_t n, unsigned r) { snprintf(out, n, "soak.v%u", r); }
+
+/* Write its variable: every element one more than the last value (the
+ * local copy starts with the global value, so a new incarnation goes on
+ * from the last complete write of the dead one). A reader that sees
+ * elements differ saw a torn value. */
+static void do_svar_write(ctx_t* c) {
+    char name[16];
+    svar_name(name, sizeof name, (unsigned)c->writes_var);
+    double* v = chm_svar_set_local(c->vars, name);
+    const double next = v[0] + 1.0;
+    for (int i = 0; i < SOAK_SVAR_ELEMS; ++i) v[i] = next;
+    ST(c->me->svar_writing, 1u); /* from here a death leaves this write in doubt */
+    const int r = chm_svar_set_write(c->vars);
+    if (r == 0) {
+        ++c->me->svar_writes;
+        progress(c, SOAK_OBJ_SVAR);
+    } else {
+        fail(c, r, SOAK_OP_SVAR_WRITE);
+    }
+    ST(c->me->svar_writing, 0u);
+}
+
+/* Copy every input in: each must be one whole value (all elements equal)
+ * and never older than one this incarnation saw before. */
+static void do_svar_read(ctx_t* c) {
+    const int r = chm_svar_set_read(c->vars);
+    if (r == -EAGAIN) { /* an input changed under 64 attempts: kept the old copy */
+        ++c->me->svar_retry;
+    } else if (r != 0) {
+        fail(c, r, SOAK_OP_SVAR_READ);
+        return;
+    }
+    char name[16];
+    for (unsigned k = 1; k <= c->n_vars; ++k) {
+        if ((int)k == c->writes_var) continue;
+        svar_name(name, sizeof name, k);
+        const double* v = chm_svar_set_local(c->vars, name);
+        for (int i = 1; i < SOAK_SVAR_ELEMS; ++i)
+            if (v[i] != v[0]) {
+                ++c->me->svar_torn;
+                fail(c, -EBADMSG, SOAK_OP_SVAR_READ);
+                snprintf(c->me->last_err_text, sizeof c->me->last_err_text,
+                         "%s torn: element 0 = %.0f, element %d = %.0f", name, v[0], i, v[i]);
+                break;
+            }
+        if (v[0] < c->seen[k]) {
+            ++c->me->svar_back;
+            fail(c, -EBADMSG, SOAK_OP_SVAR_READ);
+            snprintf(c->me->last_err_text, sizeof c->me->last_err_text, "%s went back from %.0f to %.0f", name,
+                     c->seen[k], v[0]);
+        }
+        if (v[0] > c->seen[k]) c->seen[k] = v[0];
+    }
+    ++c->me->svar_reads;
+}
+
+/* The worker's state-variable set. The first task of RTPU r (worker id
+ * r-1) is soak.vr's one writer: its set claims it at once, and a dead
+ * predecessor's claim must not stand in the way (svar.h: a writer whose
+ * process died no longer counts), so -EBUSY is an error here, not a wait. */
+static int open_vars(ctx_t* c) {
+    char names[SOAK_SVAR_MAX][16];
+    const char* in[SOAK_SVAR_MAX];
+    const char* out[1];
+    size_t n_in = 0;
+    c->n_vars = c->l->rtpus;
+    c->writes_var = c->id < c->l->rtpus ? (int)c->id + 1 : 0;
+    for (unsigned k = 1; k <= c->n_vars; ++k) {
+        svar_name(names[k - 1], sizeof names[k - 1], k);
+        if ((int)k == c->writes_var) out[0] = names[k - 1];
+        else in[n_in++] = names[k - 1];
+    }
+    char owner[24];
+    snprintf(owner, sizeof owner, "soak-worker%u", c->id);
+    const int r = chm_svar_set_create(owner, in, n_in, out, c->writes_var ? 1 : 0, &c->vars);
+    if (r) return fprintf(stderr, "soak worker %u: state-variable set: %d %s\n", c->id, r, chm_bp_last_error()), r;
+    if (c->writes_var) ++c->me->svar_claims;
+    for (unsigned k = 1; k <= c->n_vars; ++k) {
+        const double* v = chm_svar_set_local(c->vars, names[k - 1]);
+        c->seen[k] = v ? v[0] : 0;
+    }
+    return 0;
 }
 
 static int open_all(ctx_t* c) {
@@ -262,7 +361,7 @@ static int open_all(ctx_t* c) {
     r = chm_shm_attach("soak.shm", &p, NULL);
     if (r) return fprintf(stderr, "soak worker %u: attach soak.shm: %d\n", c->id, r), r;
     c->shm = (soak_shm_t*)p;
-    return 0;
+    return open_vars(c);
 }
 
 int soak_worker_run(const char* ledger_path, unsigned id, uint32_t inc, uint64_t seed) {
@@ -274,6 +373,9 @@ int soak_worker_run(const char* ledger_path, unsigned id, uint32_t inc, uint64_t
     ctx_t c;
     memset(&c, 0, sizeof c);
     c.l = (soak_ledger_t*)map;
+    if (c.l->layout != sizeof(soak_ledger_t))
+        return fprintf(stderr, "soak worker %u: ledger layout %u bytes, this build %zu: rebuild\n", id, c.l->layout,
+                       sizeof(soak_ledger_t)), 1;
     if (id >= c.l->workers) return fprintf(stderr, "soak worker %u: only %u workers\n", id, c.l->workers), 1;
     c.me = &c.l->w[id];
     c.id = id;
@@ -284,12 +386,13 @@ int soak_worker_run(const char* ledger_path, unsigned id, uint32_t inc, uint64_t
     chm_rtpu_timeout_set(SOAK_OP_TIMEOUT_NS); /* every express-mail call of this process */
     ST(c.me->hb_ns, now_ns());
     ST(c.me->started, inc);
-    while (!LD(c.me->quit)) {
+    while (!LD(c.me->quit) && !soak_worker_stop) {
         nap_us(rnd(&c) % 200); /* a gap between operations: ~5,000 a second at most */
         const uint64_t k = rnd(&c) % 100;
-        unsigned op = k < 27 ? SOAK_OP_SEND : k < 54 ? SOAK_OP_RECV : k < 68 ? SOAK_OP_PV
-                    : k < 78 ? SOAK_OP_SHM_WRITE : k < 88 ? SOAK_OP_SHM_READ : k < 95 ? SOAK_OP_PING
-                    : SOAK_OP_PAUSE;
+        unsigned op = k < 25 ? SOAK_OP_SEND : k < 50 ? SOAK_OP_RECV : k < 63 ? SOAK_OP_PV
+                    : k < 72 ? SOAK_OP_SHM_WRITE : k < 81 ? SOAK_OP_SHM_READ : k < 87 ? SOAK_OP_SVAR_WRITE
+                    : k < 92 ? SOAK_OP_SVAR_READ : k < 97 ? SOAK_OP_PING : SOAK_OP_PAUSE;
+        if (op == SOAK_OP_SVAR_WRITE && !c.writes_var) op = SOAK_OP_SVAR_READ;
         ST(c.me->op, op);
         switch (op) {
         case SOAK_OP_SEND: do_send(&c); break;
@@ -298,12 +401,15 @@ int soak_worker_run(const char* ledger_path, unsigned id, uint32_t inc, uint64_t
         case SOAK_OP_SHM_WRITE: do_shm_write(&c); break;
         case SOAK_OP_SHM_READ: do_shm_read(&c); break;
         case SOAK_OP_PING: do_ping(&c); break;
+        case SOAK_OP_SVAR_WRITE: do_svar_write(&c); break;
+        case SOAK_OP_SVAR_READ: do_svar_read(&c); break;
         default: nap_us(rnd(&c) % 1000); break;
         }
         ++c.me->op_count[op];
         ST(c.me->op, (uint32_t)SOAK_OP_IDLE);
         ST(c.me->hb_ns, now_ns());
     }
+    if (chm_svar_set_destroy(c.vars) != 0) fail(&c, -ETIMEDOUT, SOAK_OP_SVAR_WRITE); /* its claim ends now */
     ST(c.me->done, inc);
     return 0;
 }

@@ -4,6 +4,7 @@
 #define CHM_SOAK_WORKER_H
 
 #include <chimera/spin.h>
+#include <signal.h>
 #include <stdint.h>
 
 #include "ledger.h"
@@ -19,9 +20,13 @@ typedef struct soak_shm {
     uint64_t word[SOAK_SHM_WORDS];
 } soak_shm_t;
 
+/* Set (from a signal handler) to end the loop after the operation under
+ * way, as the ledger's quit does: a host process's graceful stop. */
+extern volatile sig_atomic_t soak_worker_stop;
+
 /* Run worker `id`, incarnation `inc`, until the ledger says quit. The
  * process must already be attached to the soak's backplane. Returns 0
- * after a quit, 1 when the ledger or an object could not be opened. */
+ * after a quit (or soak_worker_stop), 1 when the ledger or an object could not be opened. */
 int soak_worker_run(const char* ledger_path, unsigned id, uint32_t inc, uint64_t seed);
 
 #endif
