@@ -149,8 +149,10 @@ protected:
         if (p > 0) children_.push_back(p);
         return p;
     }
-    // The child's exit status, -SIGNAL if killed, or 1000 on timeout.
-    int reap(pid_t p, int timeout_ms = 20000) {
+    // The child's exit status, -SIGNAL if killed, or 1000 on timeout (a
+    // bound for a hang, not for speed: qemu on a loaded machine runs
+    // children many times slower).
+    int reap(pid_t p, int timeout_ms = 120000) {
         for (int waited = 0;; waited += 1) {
             int st = 0;
             const pid_t r = waitpid(p, &st, WNOHANG);
