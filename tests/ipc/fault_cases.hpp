@@ -76,6 +76,7 @@ std::string verify_sem();
 std::string verify_shm();
 std::string verify_vseg();
 std::string verify_vq();
+std::string verify_vs();
 std::string verify_ring();
 // The RTPU whose server the express-mail cases ask: the driver's own in
 // the in-task matrix, another RTPU child (2) in the kill matrix.
@@ -92,6 +93,8 @@ void* g_victim_addr;
 std::uint32_t g_refs;  // this process's attaches of "fseg"
 bool g_vseg;           // "vseg" must exist
 bool g_vq;             // "vq" must exist
+bool g_vs;             // "vs" must exist
+chm_rsem_t* g_victim_s;
 chm_msgq_t* g_victim_q;
 
 void fill(std::uint32_t n) {
@@ -253,6 +256,16 @@ const Case kCases[] = {
          return chm_msgq_destroy("nextq");
      },
      verify_vq},
+    // A new remote semaphore "vs", the same way.
+    {"registry.create.locked", [] {}, [] { (void)chm_rsem_create("vs", CHM_SEM_COUNTING, 1, CHM_SHM_COMMON, &g_victim_s); },
+     [](Action a) { g_vs = deferred(a); },
+     [] {
+         chm_rsem_t* s = nullptr;
+         if (chm_rsem_create("nexts", CHM_SEM_COUNTING, 0, CHM_SHM_COMMON, &s) != 0) return -1;
+         if (chm_rsem_close(s) != 0) return -2;
+         return chm_rsem_destroy("nexts");
+     },
+     verify_vs},
     // Express mail to this RTPU (its server runs below the victim, so the
     // victim reaches its wait): the record claimed, then in flight.
     {"xmail.claim.locked", [] {}, victim_ping, [](Action) {}, next_ping, verify_ring},
@@ -329,6 +342,18 @@ std::string verify_vq() {
         return "vq does not carry a message";
     // Ours and the victim's open; then the name.
     if (chm_msgq_close(q) != 0 || chm_msgq_close(q) != 0 || chm_msgq_destroy("vq") != 0) return "vq cannot be destroyed";
+    return "";
+}
+
+std::string verify_vs() {
+    chm_rsem_t* s = nullptr;
+    const int r = chm_rsem_open("vs", &s);
+    if ((r == 0) != g_vs) return std::string("vs ") + (r == 0 ? "exists" : "does not exist");
+    if (r != 0) return "";
+    if (chm_rsem_try_p(s) != 0 || chm_rsem_try_p(s) != -EAGAIN || chm_rsem_v(s) != 0)
+        return "vs does not hold exactly its one unit";
+    // Ours and the victim's open; then the name.
+    if (chm_rsem_close(s) != 0 || chm_rsem_close(s) != 0 || chm_rsem_destroy("vs") != 0) return "vs cannot be destroyed";
     return "";
 }
 

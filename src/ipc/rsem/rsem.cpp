@@ -198,6 +198,7 @@ extern "C" {
 
 static int rsem_create_impl(const char* name, enum chm_sem_kind kind, uint32_t initial, int where,
                             chm_rsem_t** out) {
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     if (!name || !out || (kind != CHM_SEM_BINARY && kind != CHM_SEM_COUNTING) ||
         (kind == CHM_SEM_BINARY && initial > 1)) {
         set_error("chm_rsem_create: NULL name or out, unknown kind, or a binary count above 1");
@@ -248,6 +249,7 @@ static int rsem_create_impl(const char* name, enum chm_sem_kind kind, uint32_t i
 }
 
 static int rsem_open_impl(const char* name, chm_rsem_t** out) {
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     if (!name || !out) return set_error("chm_rsem_open: NULL name or out"), -EINVAL;
     Attachment* a = current();
     if (!a) return set_error("chm_rsem_open: not attached to a backplane"), -ENOTCONN;
@@ -383,6 +385,7 @@ static int rsem_waiting_impl(chm_rsem_t* h) {
 }
 
 static int rsem_close_impl(chm_rsem_t* h) {
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     Rsem* s = from_handle(h);
     if (!s) return set_error("chm_rsem_close: not a remote semaphore handle"), -EINVAL;
     Attachment* a = current();
@@ -396,6 +399,7 @@ static int rsem_close_impl(chm_rsem_t* h) {
 }
 
 static int rsem_destroy_impl(const char* name) {
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     if (!name) return set_error("chm_rsem_destroy: NULL name"), -EINVAL;
     Attachment* a = current();
     if (!a) return -ENOTCONN;
