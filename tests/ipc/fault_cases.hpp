@@ -18,9 +18,11 @@
 #include <thread>
 #include <vector>
 
+#include "chimera/err.h"
 #include "chimera/rsem.h"
 #include "chimera/rtpu.h"
 #include "chimera/shm.h"
+#include "chimera/svar.h"
 #include "ipc/xmail/xmail.hpp"
 #include "fault_fixture.hpp"
 
@@ -77,6 +79,7 @@ std::string verify_shm();
 std::string verify_vseg();
 std::string verify_vq();
 std::string verify_vs();
+std::string verify_fv();
 std::string verify_ring();
 // The RTPU whose server the express-mail cases ask: the driver's own in
 // the in-task matrix, another RTPU child (2) in the kill matrix.
@@ -95,6 +98,8 @@ bool g_vseg;           // "vseg" must exist
 bool g_vq;             // "vq" must exist
 bool g_vs;             // "vs" must exist
 chm_rsem_t* g_victim_s;
+chm_svar_set_t* g_victim_set;  // set by the victim's create once it returned
+bool g_fv_made;                // the victim's create completed
 chm_msgq_t* g_victim_q;
 
 void fill(std::uint32_t n) {
@@ -266,6 +271,20 @@ const Case kCases[] = {
          return chm_rsem_destroy("nexts");
      },
      verify_vs},
+    // A state-variable set claiming "fv": the entry half claimed.
+    {"svar.claim.locked", [] { g_victim_set = nullptr; },
+     [] {
+         const char* out[] = {"fv"};
+         (void)chm_svar_set_create("victim", nullptr, 0, out, 1, &g_victim_set);
+     },
+     [](Action a) { g_fv_made = deferred(a); },
+     [] {  // another variable's claim: the table's lock at once
+         const char* out[] = {"fw"};
+         chm_svar_set_t* s = nullptr;
+         if (chm_svar_set_create("next", nullptr, 0, out, 1, &s) != 0) return -1;
+         return chm_svar_set_destroy(s);
+     },
+     verify_fv},
     // Express mail to this RTPU (its server runs below the victim, so the
     // victim reaches its wait): the record claimed, then in flight.
     {"xmail.claim.locked", [] {}, victim_ping, [](Action) {}, next_ping, verify_ring},
@@ -355,6 +374,32 @@ std::string verify_vs() {
     // Ours and the victim's open; then the name.
     if (chm_rsem_close(s) != 0 || chm_rsem_close(s) != 0 || chm_rsem_destroy("vs") != 0) return "vs cannot be destroyed";
     return "";
+}
+
+std::string verify_fv() {
+    // The create returned its set only when it completed; however the
+    // victim ended, its claim ended with it, so "fv" has no writer and a
+    // new set claims it at once.
+    if ((g_victim_set != nullptr) != g_fv_made)
+        return std::string("the victim's create ") + (g_victim_set ? "returned a set" : "returned no set");
+    if (g_victim_set && chm_svar_set_destroy(g_victim_set) != 0) return "the victim's set cannot be destroyed";
+    g_victim_set = nullptr;
+    chm_svar_info_t in;
+    if (chm_svar_info("fv", &in) != 0) return "fv is gone";
+    if (in.has_writer) return std::string("fv is still written by ") + in.writer;
+    const char* out[] = {"fv"};
+    chm_svar_set_t* s = nullptr;
+    if (chm_svar_set_create("check", nullptr, 0, out, 1, &s) != 0) return std::string("fv cannot be claimed: ") + chm_err_last();
+    if (chm_svar_set_destroy(s) != 0) return "the check's set cannot be destroyed";
+    return "";
+}
+
+// The variables the cases use, declared by the test before the RTPUs start.
+inline void declare_fault_vars() {
+    for (const char* n : {"fv", "fw"}) {
+        chm_svar_decl_t d{n, CHM_SVAR_DOUBLE, 1, 1, ""};
+        ASSERT_EQ(chm_svar_declare(&d), 0) << chm_err_last();
+    }
 }
 
 // The target's ring records that are not FREE: "" when none.

@@ -155,6 +155,7 @@ TEST_F(IpcFault, ATaskEndedAtAnyPointOfAQueueCallLeavesNothingBehind) {
     ASSERT_NO_FATAL_FAILURE(make_sem(&s));
     void* seg = nullptr;
     ASSERT_EQ(chm_shm_create("fseg", 256, CHM_SHM_COMMON, &seg), 0) << chm_bp_last_error();
+    ASSERT_NO_FATAL_FAILURE(declare_fault_vars());
     const std::string path = path_;
     const pid_t child = spawn([path] {
         alarm(600);

@@ -30,6 +30,7 @@ TEST_F(IpcFault, AnRtpuKilledAtAnyPointOfACallLeavesNothingBehind) {
     ASSERT_NO_FATAL_FAILURE(make_sem(&g_s));
     void* seg = nullptr;
     ASSERT_EQ(chm_shm_create("fseg", 256, CHM_SHM_COMMON, &seg), 0) << chm_bp_last_error();
+    ASSERT_NO_FATAL_FAILURE(declare_fault_vars());
     g_refs = 1;  // the create's attach (the first check gives it back)
     g_host_waiter = true;
     // The express-mail cases ask RTPU 2, a server that lives through the

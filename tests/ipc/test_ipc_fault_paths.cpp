@@ -335,6 +335,77 @@ TEST_F(IpcFaultPaths, ABadUserBufferFaultsBeforeTheQueueIsLocked) {
 namespace chm::test {
 namespace {
 
+// A task destroyed inside a call ends when the call returns. An end hook
+// of its that makes a backplane call of its own must not carry that owed
+// end out again from inside the hook: before, the hook's call ended the
+// task a second time as it returned, and the rest of the hook never ran.
+struct Hooked {
+    std::atomic<int> runs{0}, finished{0};
+    std::atomic<int> end_reason{-1};
+    std::atomic<int> units{-1000};
+};
+Hooked* g_hooked;
+
+void end_hook(void*) {
+    ++g_hooked->runs;
+    (void)chm_rsem_v(g_s);  // a call scope of its own
+    ++g_hooked->finished;
+}
+void hooked_victim(void*) {
+    if (chm_task_on_end(end_hook, nullptr) != 0) return;
+    setenv("CHIMERA_FAULT_AT", "msgq.send.copy:destroy", 1);
+    stop::reload();
+    const std::uint32_t one = 1;
+    (void)chm_msgq_send(g_q, 0, 0, &one, sizeof one);  // destroyed, owed to the return
+}
+void hooked_driver(void*) {
+    chm_task_attr_t at;
+    chm_task_attr_init(&at);
+    at.name = "victim";
+    at.priority = 20;
+    at.joinable = 1;
+    chm_tid_t v = CHM_TID_NONE;
+    chm_task_status_t st;
+    if (chm_task_spawn(&v, hooked_victim, nullptr, &at) == 0 && chm_task_join(v, 30'000'000'000ull, &st) == 0)
+        g_hooked->end_reason = int(st.end_reason);
+    unsetenv("CHIMERA_FAULT_AT");
+    stop::reload();
+    g_hooked->units = chm_rsem_value(g_s);
+    chm_kernel_stop(0);
+}
+
+TEST_F(IpcFaultPaths, AnEndHooksOwnCallDoesNotEndTheTaskAgain) {
+    SharedBlock<Hooked> shared;
+    Hooked* h = shared.get();
+    ASSERT_NE(h, nullptr);
+    g_hooked = h;
+    chm_msgq_t* q = nullptr;
+    ASSERT_NO_FATAL_FAILURE(attach_with_queue(&q));
+    chm_rsem_t* s = nullptr;
+    ASSERT_NO_FATAL_FAILURE(make_sem(&s));
+    const std::string path = path_;
+    const pid_t child = spawn([path] {
+        return run_rtpu(path, 1, [] {
+            if (chm_msgq_open("fq", &g_q) || chm_rsem_open("fs", &g_s)) _exit(101);
+            spawn_task(hooked_driver, nullptr, "driver", 10, 0);
+        });
+    });
+    EXPECT_EQ(reap(child), 0);
+    EXPECT_EQ(h->end_reason.load(), int(CHM_TASK_DESTROYED));
+    EXPECT_EQ(h->runs.load(), 1) << "the end hook ran more than once";
+    EXPECT_EQ(h->finished.load(), 1) << "the end hook was cut short at its own call's return";
+    EXPECT_EQ(h->units.load(), 1) << "the hook's one V";
+    std::uint32_t x = 0;
+    EXPECT_EQ(chm_msgq_try_receive(q, &x, sizeof x, nullptr), int(sizeof x)) << "the send completed before the end";
+    EXPECT_EQ(check_now(), "");
+}
+
+}  // namespace
+}  // namespace chm::test
+
+namespace chm::test {
+namespace {
+
 // A user spin-lock taken by one task and unlocked by another (allowed: the
 // lock is the RTPU's) leaves a stale entry on the taker's hold list; ten
 // rounds of that, then the taker aborts holding a second spin-lock: that

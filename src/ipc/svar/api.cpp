@@ -8,6 +8,7 @@
 #include "chimera/svar.h"
 #include "ipc/err/report.hpp"
 #include "ipc/svar/svar.hpp"
+#include "kernel/task/holds.hpp"
 
 using namespace chm::ipc::svar;
 namespace bp = chm::bp;
@@ -107,6 +108,7 @@ int declare_locked(const Table& t, const chm_svar_decl_t* d) {
 }
 
 int declare_impl(const chm_svar_decl_t* d) {
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     if (int r = check_decl(d)) return r;
     Table t;
     if (int r = open_table(true, &t)) return r;

@@ -21,8 +21,10 @@
 #include "chimera/bp.h"
 #include "chimera/svar.h"
 #include "chimera/task.h"
+#include "ipc/backplane/stop_point.hpp"
 #include "ipc/err/report.hpp"
 #include "ipc/svar/svar.hpp"
+#include "kernel/task/holds.hpp"
 
 using namespace chm::ipc::svar;
 namespace bp = chm::bp;
@@ -225,6 +227,7 @@ int claim_outputs(chm_svar_set* s, const char* const* displace, size_t n_displac
         Entry* e = outputs(s)[k].e;
         if (holds(s, e)) continue;  // claiming again re-asserts only what another took
         std::memcpy(e->writer_name, s->owner, kNameLen);  // the name before the token: info reads both
+        if (k == 0) CHM_STOP_POINT("svar.claim.locked");  // the first entry half written
         e->since_lo.store(std::uint32_t(since), Rel);
         e->since_hi.store(std::uint32_t(since >> 32), Rel);
         e->switch_cell.store(sw.none() ? 0 : sw.cell + 1, Rel);
@@ -252,6 +255,7 @@ int with_claim_args(const char* call, chm_svar_set* set, const char* const* disp
 
 int create_impl(const char* owner, const char* const* inputs, size_t n_in, const char* const* outs, size_t n_out,
                 chm_svar_set_t** out, bool claim) {
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     if (!out || !owner || !owner[0] || (n_in && !inputs) || (n_out && !outs))
         return bp::set_error("chm_svar_set_create: NULL or empty owner, NULL out or NULL name list"), -EINVAL;
     if (std::strlen(owner) > CHM_SVAR_NAME_MAX)
@@ -377,16 +381,19 @@ int chm_svar_set_open(const char* owner, const char* const* inputs, size_t n_in,
 }
 
 int chm_svar_set_claim(chm_svar_set_t* set, const char* const* displace, size_t n_displace) {
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     return with_claim_args("chm_svar_set_claim", set, displace, n_displace,
                            [&] { return claim_outputs(set, displace, n_displace); });
 }
 
 int chm_svar_set_claim_at(chm_svar_set_t* set, const char* const* displace, size_t n_displace, uint64_t at_ns) {
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     return with_claim_args("chm_svar_set_claim_at", set, displace, n_displace,
                            [&] { return claim_outputs(set, displace, n_displace, at_ns); });
 }
 
 int chm_svar_set_check_claim(chm_svar_set_t* set, const char* const* displace, size_t n_displace) {
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     return with_claim_args("chm_svar_set_check_claim", set, displace, n_displace, [&] {
         int r = lock(set->table);
         if (r == 0) {
@@ -410,6 +417,7 @@ int chm_svar_set_displaced(const chm_svar_set_t* set, uint64_t release_ns) {
 }
 
 int chm_svar_set_release(chm_svar_set_t* set) {
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     if (!set) return chm::ipc::leave((bp::set_error("chm_svar_set_release: NULL set"), -EINVAL), "chm_svar_set_release");
     return chm::ipc::leave(release_claims(set), "chm_svar_set_release");
 }
@@ -455,6 +463,7 @@ int chm_svar_set_bytes(const chm_svar_set_t* set, size_t* in_bytes, size_t* out_
 }
 
 int chm_svar_set_destroy(chm_svar_set_t* set) {
+    chm::kernel::CallScope in_call;  // a destroy or abort-cycle meanwhile waits for the return
     if (!set)
         return chm::ipc::leave((bp::set_error("chm_svar_set_destroy: NULL set"), -EINVAL), "chm_svar_set_destroy");
     const int r = release_claims(set);

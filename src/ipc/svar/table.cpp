@@ -9,6 +9,7 @@
 
 #include "chimera/svar.h"
 #include "ipc/svar/svar.hpp"
+#include "kernel/task/holds.hpp"
 
 namespace chm::ipc::svar {
 
@@ -189,10 +190,15 @@ void repair_locked(const Table& t) {
     t.hdr()->data_used.store(used, Rel);
 }
 
+// Every locked stretch of the table is a call scope (kernel/task/holds.hpp):
+// a destroy or abort-cycle of the task meanwhile is owed until unlock, so
+// the change the lock guards is finished, not left to the repair.
 int lock(const Table& t) {
     bp::Lock* l = &t.hdr()->lock;
+    kernel::call_enter();
     const int r = bp::lock_acquire(*t.a, l, t.a->token, bp::kInternalPollNs, bp::kInternalTimeoutNs);
     if (r == -ETIMEDOUT) {
+        kernel::call_leave();
         bp::set_error("state-variable table: a live holder kept its lock past 5 s");
         return r;
     }
@@ -203,7 +209,10 @@ int lock(const Table& t) {
     return 0;
 }
 
-void unlock(const Table& t) { bp::lock_release(&t.hdr()->lock); }
+void unlock(const Table& t) {
+    bp::lock_release(&t.hdr()->lock);
+    kernel::call_leave();  // what was owed meanwhile happens here
+}
 
 int read_value(const Entry* e, const char* buf0, std::uint32_t stride, std::uint32_t bytes, void* dst) {
     for (unsigned attempt = 0; attempt < kReadAttempts; ++attempt) {

@@ -72,6 +72,11 @@ void task_run_end_hooks(Tcb* t) {
 
 [[noreturn]] void task_end_current(chm_task_end_reason reason, int status) {
     Tcb* cur = g_k.current;
+    // Ending now: nothing is owed any more. An end hook's backplane call
+    // (a state-variable set giving its claims back, say) must not carry
+    // an owed end or cycle restart out again from inside the hook.
+    cur->end_owed = false;
+    cur->abort_cycle_owed = false;
     task_run_end_hooks(cur);
     port::irq_disable();
     cur->end_reason = std::uint8_t(reason);
