@@ -96,8 +96,7 @@ struct Tcb {
         std::uint32_t tag;
     };
     static constexpr int kMaxHolds = 6;
-    Hold holds[kMaxHolds] = {};
-    std::uint8_t nholds = 0;
+    std::uint8_t nholds = 0;  // entries of `holds` (below) in use
     std::uint8_t call_depth = 0;
     bool at_cancel_point = false;  // in a call's wait: handlers may run, cancels take effect
     bool end_owed = false;         // destroyed inside a call
@@ -108,8 +107,7 @@ struct Tcb {
     std::uint32_t sig_blocked = 0;
     std::uint32_t sigs_taken = 0;    // handlers run (a spinning remote wait's -EINTR)
     std::uint32_t sigs_at_wait = 0;  // sigs_taken when a planned spin's record was written
-    chm_usig_handler_t sig_handler[CHM_USIG_MAX + 1] = {};
-    void* sig_arg[CHM_USIG_MAX + 1] = {};
+    std::uint32_t sig_handled = 0;   // bit n: sig_handler[n] and sig_arg[n] (below) were set
 
     // Periodic timing and deadline failures.
     std::uint64_t cycle = 0;          // index of the current cycle
@@ -146,13 +144,11 @@ struct Tcb {
     int exit_status = 0;
     WaitQueue joiners;
     struct TaskExt* ext = nullptr;
-    chm_task_timing_t new_timing{};
     std::uint64_t timing_refused = 0;
 
-    // Priority inheritance: the view fields this task owns while it lends
-    // a waiter's urgency.
+    // Priority inheritance: the view fields this task owns (`own`, below)
+    // while it lends a waiter's urgency.
     bool boosted = false;
-    chm_sched_task_t own;
 
     MufNode mn;
 
@@ -162,7 +158,17 @@ struct Tcb {
     std::size_t stack_dirty = 0;  // bytes below the top ever written (high water)
     void (*entry)(void*) = nullptr;
     void* arg = nullptr;
-    char name[CHM_TASK_NAME_MAX + 1] = {};
+
+    // Not initialised at spawn: slot_take_locked default-initialises the
+    // TCB (`new (t) Tcb`, not `Tcb()`), so these 800 bytes, rarely used,
+    // are not zeroed for every task (a cold TCB: 22 cache lines were
+    // written). Each is valid only where the field named says so.
+    Hold holds[kMaxHolds];                            // below nholds
+    chm_usig_handler_t sig_handler[CHM_USIG_MAX + 1];  // where sig_handled has the bit
+    void* sig_arg[CHM_USIG_MAX + 1];
+    chm_sched_task_t own;                             // while boosted
+    chm_task_timing_t new_timing;                     // while timing_pending
+    char name[CHM_TASK_NAME_MAX + 1];                 // written at spawn
 };
 
 inline constexpr std::uint32_t kMaxTasks = 32768;

@@ -325,7 +325,7 @@ void deliver_pending_slow_locked() {
         const int signo = __builtin_ctz(sigs);
         cur->sig_pending &= ~(1u << signo);
         ++cur->sigs_taken;
-        chm_usig_handler_t h = cur->sig_handler[signo];
+        chm_usig_handler_t h = cur->sig_handled & (1u << signo) ? cur->sig_handler[signo] : nullptr;
         if (h) {
             void* a = cur->sig_arg[signo];
             port::irq_restore();
