@@ -313,6 +313,16 @@ void timer_cancel_locked(TimerNode* n);
 bool timers_run_locked(std::uint64_t now);
 // Program the port timer for the earliest of the timer heap and quantum.
 void timer_program_locked(std::uint64_t now);
+// An event at most this much before the armed time rides on it.
+inline constexpr std::uint64_t kArmSlackNs = 1000;  // far below a timer signal's latency
+// The port timer already serves an event at `due` (the earliest one): it
+// is armed after `now`, at most kArmSlackNs after `due` (its early tick
+// finds a later one), and is not a repeating timer that would tick on for
+// nothing. timer_program_locked would then change nothing; checked inline
+// where a quantum is armed at every switch.
+inline bool timer_serves_locked(std::uint64_t due, std::uint64_t now) {
+    return g_k.armed_at > now && g_k.armed_at <= due + kArmSlackNs && !port::timer_interval();
+}
 // The timer signal came: what is armed now (a repeating timer re-armed
 // itself; a one-shot is spent).
 void timer_fired_locked(std::uint64_t now);
@@ -364,7 +374,16 @@ inline void deliver_pending_locked() {
         (!cur->call_depth || cur->at_cancel_point))
         deliver_pending_slow_locked();
 }
-void charge_current_locked(std::uint64_t now);
+// Charge the running task its CPU time up to `now` (inline: per-switch
+// accounting does it at every switch).
+inline void charge_current_locked(std::uint64_t now) {
+    Tcb* cur = g_k.current;
+    if (!cur) return;
+    const std::uint64_t d = now - g_k.switched_in_at;
+    cur->cpu_ns += d;
+    cur->s.cycle_cpu_ns += d;
+    g_k.switched_in_at = now;
+}
 
 // ---- interrupts (irq/irq.cpp)
 // Deliver every raised, enabled vector to its handler. Mask held; kernel

@@ -30,15 +30,6 @@ void mask_not_held(const char* fn) {
     std::abort();
 }
 
-void charge_current_locked(std::uint64_t now) {
-    Tcb* cur = g_k.current;
-    if (!cur) return;
-    const std::uint64_t d = now - g_k.switched_in_at;
-    cur->cpu_ns += d;
-    cur->s.cycle_cpu_ns += d;
-    g_k.switched_in_at = now;
-}
-
 void make_ready_locked(Tcb* t, bool keep_place) {
     if (t->suspend_count) {  // a suspended task's wait ended: stay suspended
         t->state = TaskState::Suspended;
@@ -103,7 +94,8 @@ void quantum_arm_locked(Tcb* t, std::uint64_t now) {
     // re-arm per switch.
     if (const TimerNode* top = g_k.timers.top(); top && top->due <= due) return;
     g_k.quantum_due = due;
-    timer_program_locked(now);
+    // The earliest event now; usually an earlier quantum's tick serves it.
+    if (!timer_serves_locked(due, now)) timer_program_locked(now);
 }
 
 bool must_switch_locked(std::uint64_t now) {
