@@ -350,10 +350,16 @@ void unready_locked(Tcb* t);
 // Run the most urgent task: switch if it is not the current one (or the
 // current one stopped running). Task or kernel context, mask held.
 void schedule_locked();
+// The same at `now`, a clock reading the caller took in this kernel call
+// (the running task already charged up to it, when accounting is on).
+void schedule_at_locked(std::uint64_t now);
 // After a kernel call made something ready or changed an urgency: let the
 // most urgent task run and deliver what is owed to the caller. No-op outside
 // a task (spawning from main before chm_kernel_run).
 void reschedule_locked();
+// The same with the caller's fresh reading `now` (now_locked() in this
+// call) instead of a second one: it charges up to `now` itself.
+void reschedule_at_locked(std::uint64_t now);
 // True when the current task should give up the CPU now.
 bool must_switch_locked(std::uint64_t now);
 // The decision at an event (timers fired) while a task runs: charges it,

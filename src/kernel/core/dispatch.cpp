@@ -186,12 +186,13 @@ inline std::uint64_t schedule_now_locked() {
     return now;
 }
 
-void schedule_locked() {
+void schedule_locked() { schedule_at_locked(schedule_now_locked()); }
+
+void schedule_at_locked(std::uint64_t now) {
     CHM_ASSERT_LOCKED();
     // A priority changed without a switch (set, lent, handler) is published too.
     if (port::g_db_publishes) publish_running_locked();
     g_k.decision_owed = false;
-    const std::uint64_t now = schedule_now_locked();
     Tcb* cur = g_k.current;
     const bool cur_runs = cur && cur->state == TaskState::Running;
     if (cur_runs && cur->lock_nest) return;
@@ -332,6 +333,13 @@ void reschedule_locked() {
     // (the tick that ran it checks must_switch_locked).
     if (!g_k.current || g_k.in_irq) return;
     schedule_locked();
+    deliver_pending_locked();
+}
+
+void reschedule_at_locked(std::uint64_t now) {
+    if (!g_k.current || g_k.in_irq) return;
+    if (g_k.cfg.cpu_accounting) charge_current_locked(now);
+    schedule_at_locked(now);
     deliver_pending_locked();
 }
 

@@ -242,7 +242,7 @@ int chm_task_spawn(chm_tid_t* out, void (*entry)(void*), void* arg, const chm_ta
         make_ready_locked(t);
     }
     if (out) *out = tid_of(t);
-    reschedule_locked();  // the new task may be more urgent than its parent
+    reschedule_at_locked(now);  // the new task may be more urgent than its parent
     return 0;
 }
 
