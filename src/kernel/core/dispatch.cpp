@@ -66,6 +66,13 @@ inline bool may_overtake_locked(const Tcb* head, const Tcb* t) {
     }
 }
 
+// sched_before_locked(t, head) for `head` the scheduler's pick, `t` not
+// queued: under a built-in policy from the key `head` was queued with.
+inline bool runs_before_head_locked(Tcb* t, Tcb* head, std::uint64_t now) {
+    if (g_k.builtin) return g_k.rq.top_strictly_after(rq_key(g_k.policy, &t->s));
+    return sched_before_locked(t, head, now);
+}
+
 // The running task's quanta end at slice_start + k * quantum (sched.h).
 // An end that was not armed (nobody to rotate with until this instant)
 // still counts when an event lands on it exactly: on the virtual clock,
@@ -86,7 +93,7 @@ void quantum_arm_locked(Tcb* t, std::uint64_t now) {
     if (!q || g_k.quantum_due > now) return;
     g_k.quantum_due = 0;
     Tcb* head = sched_pick_locked(now);
-    if (!head || (!may_overtake_locked(head, t) && sched_before_locked(t, head, now))) return;
+    if (!head || (!may_overtake_locked(head, t) && runs_before_head_locked(t, head, now))) return;
     std::uint64_t due = g_k.slice_start + q;
     if (now >= due) due += (now - due) / q * q + q;  // the first end after now
     // A timer due first is a decision point that arms it then: a periodic
@@ -174,6 +181,25 @@ inline __attribute__((always_inline)) void requeue_and_switch_locked(Tcb* cur, T
     switch_to_locked(head, now);
 }
 
+// The running task `cur` against the pick `head` under a built-in policy:
+// the decision of schedule_at_locked with one key computed (`head`'s is
+// the one it was queued with) and used again for the requeue.
+inline __attribute__((always_inline)) void decide_builtin_locked(Tcb* cur, Tcb* head, std::uint64_t now) {
+    RqKey k = rq_key(g_k.policy, &cur->s);
+    const bool preempted = g_k.rq.top_before(k);
+    if (!preempted && (g_k.rq.top_strictly_after(k) || !quantum_expired_locked(now))) {
+        quantum_arm_locked(cur, now);
+        return;
+    }
+    if (!preempted) k.seq = cur->s.seq = ++g_k.seq;  // round robin: behind its equals
+    cur->state = TaskState::Ready;
+    cur->in_ready = true;
+    head->in_ready = false;
+    g_k.rq.replace_top(cur, k);
+    head->state = TaskState::Running;
+    switch_to_locked(head, now);
+}
+
 }  // namespace
 
 // Read the clock only when something needs it: per-switch CPU accounting
@@ -199,6 +225,10 @@ void schedule_at_locked(std::uint64_t now) {
     Tcb* head = sched_pick_locked(now);
     if (cur_runs) {
         if (!head) return;
+        if (g_k.builtin) {  // a running task is neither queued nor suspended
+            decide_builtin_locked(cur, head, now);
+            return;
+        }
         if (sched_before_locked(head, cur, now)) {
             requeue_and_switch_locked(cur, head, true, now);  // preempted
             return;
