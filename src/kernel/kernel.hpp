@@ -56,7 +56,7 @@ enum class TaskState : std::uint8_t {
 
 struct Tcb {
     port::Context ctx;
-    chm_sched_task_t s;      // the scheduler's view
+    chm_sched_task_t s{};    // the scheduler's view
     TaskState state = TaskState::Ready;
     bool in_ready = false;   // enqueued in the scheduler
     bool used = false;
