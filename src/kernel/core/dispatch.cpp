@@ -87,11 +87,11 @@ bool quantum_expired_locked(std::uint64_t now) {
 
 // Arm the end of `t`'s current quantum, but only when a decision there can
 // change anything (tickless): an equal task waits (round robin), or the
-// waiting head may overtake it as time passes.
-void quantum_arm_locked(Tcb* t, std::uint64_t now) {
-    const std::uint64_t q = g_k.cfg.quantum_ns;
-    if (!q || g_k.quantum_due > now) return;
-    g_k.quantum_due = 0;
+// waiting head may overtake it as time passes (quantum_arm_locked). This
+// is its body, for a quantum `q` whose end is not armed (quantum_due 0),
+// inline in the switch, which starts every slice.
+inline __attribute__((always_inline)) void quantum_arm_fresh_locked(Tcb* t, std::uint64_t now,
+                                                                    std::uint64_t q) {
     Tcb* head = sched_pick_locked(now);
     if (!head || (!may_overtake_locked(head, t) && runs_before_head_locked(t, head, now))) return;
     std::uint64_t due = g_k.slice_start + q;
@@ -103,6 +103,13 @@ void quantum_arm_locked(Tcb* t, std::uint64_t now) {
     g_k.quantum_due = due;
     // The earliest event now; usually an earlier quantum's tick serves it.
     if (!timer_serves_locked(due, now)) timer_program_locked(now);
+}
+
+void quantum_arm_locked(Tcb* t, std::uint64_t now) {
+    const std::uint64_t q = g_k.cfg.quantum_ns;
+    if (!q || g_k.quantum_due > now) return;
+    g_k.quantum_due = 0;
+    quantum_arm_fresh_locked(t, now, q);
 }
 
 bool must_switch_locked(std::uint64_t now) {
@@ -144,7 +151,7 @@ __attribute__((noinline)) void switch_to_locked(Tcb* next, std::uint64_t now) {
     if (g_k.cfg.cpu_accounting) g_k.switched_in_at = now;
     g_k.slice_start = now;
     g_k.quantum_due = 0;
-    if (next && g_k.cfg.quantum_ns) quantum_arm_locked(next, now);
+    if (const std::uint64_t q = g_k.cfg.quantum_ns; next && q) quantum_arm_fresh_locked(next, now, q);
     ++g_k.switches;
     if (g_k.trace_switch) [[unlikely]] g_k.trace_switch(next, now);
     // Leaving for good (an ended task): no save slot, its fake stack goes.
