@@ -56,7 +56,7 @@ enum class TaskState : std::uint8_t {
 
 struct Tcb {
     port::Context ctx;
-    chm_sched_task_t s;      // the scheduler's view
+    chm_sched_task_t s{};    // the scheduler's view
     TaskState state = TaskState::Ready;
     bool in_ready = false;   // enqueued in the scheduler
     bool used = false;
@@ -96,8 +96,7 @@ struct Tcb {
         std::uint32_t tag;
     };
     static constexpr int kMaxHolds = 6;
-    Hold holds[kMaxHolds] = {};
-    std::uint8_t nholds = 0;
+    std::uint8_t nholds = 0;  // entries of `holds` (below) in use
     std::uint8_t call_depth = 0;
     bool at_cancel_point = false;  // in a call's wait: handlers may run, cancels take effect
     bool end_owed = false;         // destroyed inside a call
@@ -108,8 +107,7 @@ struct Tcb {
     std::uint32_t sig_blocked = 0;
     std::uint32_t sigs_taken = 0;    // handlers run (a spinning remote wait's -EINTR)
     std::uint32_t sigs_at_wait = 0;  // sigs_taken when a planned spin's record was written
-    chm_usig_handler_t sig_handler[CHM_USIG_MAX + 1] = {};
-    void* sig_arg[CHM_USIG_MAX + 1] = {};
+    std::uint32_t sig_handled = 0;   // bit n: sig_handler[n] and sig_arg[n] (below) were set
 
     // Periodic timing and deadline failures.
     std::uint64_t cycle = 0;          // index of the current cycle
@@ -146,13 +144,11 @@ struct Tcb {
     int exit_status = 0;
     WaitQueue joiners;
     struct TaskExt* ext = nullptr;
-    chm_task_timing_t new_timing{};
     std::uint64_t timing_refused = 0;
 
-    // Priority inheritance: the view fields this task owns while it lends
-    // a waiter's urgency.
+    // Priority inheritance: the view fields this task owns (`own`, below)
+    // while it lends a waiter's urgency.
     bool boosted = false;
-    chm_sched_task_t own;
 
     MufNode mn;
 
@@ -162,7 +158,17 @@ struct Tcb {
     std::size_t stack_dirty = 0;  // bytes below the top ever written (high water)
     void (*entry)(void*) = nullptr;
     void* arg = nullptr;
-    char name[CHM_TASK_NAME_MAX + 1] = {};
+
+    // Not initialised at spawn: slot_take_locked default-initialises the
+    // TCB (`new (t) Tcb`, not `Tcb()`), so these 800 bytes, rarely used,
+    // are not zeroed for every task (a cold TCB: 22 cache lines were
+    // written). Each is valid only where the field named says so.
+    Hold holds[kMaxHolds];                            // below nholds
+    chm_usig_handler_t sig_handler[CHM_USIG_MAX + 1];  // where sig_handled has the bit
+    void* sig_arg[CHM_USIG_MAX + 1];
+    chm_sched_task_t own;                             // while boosted
+    chm_task_timing_t new_timing;                     // while timing_pending
+    char name[CHM_TASK_NAME_MAX + 1];                 // written at spawn
 };
 
 inline constexpr std::uint32_t kMaxTasks = 32768;
@@ -307,6 +313,16 @@ void timer_cancel_locked(TimerNode* n);
 bool timers_run_locked(std::uint64_t now);
 // Program the port timer for the earliest of the timer heap and quantum.
 void timer_program_locked(std::uint64_t now);
+// An event at most this much before the armed time rides on it.
+inline constexpr std::uint64_t kArmSlackNs = 1000;  // far below a timer signal's latency
+// The port timer already serves an event at `due` (the earliest one): it
+// is armed after `now`, at most kArmSlackNs after `due` (its early tick
+// finds a later one), and is not a repeating timer that would tick on for
+// nothing. timer_program_locked would then change nothing; checked inline
+// where a quantum is armed at every switch.
+inline bool timer_serves_locked(std::uint64_t due, std::uint64_t now) {
+    return g_k.armed_at > now && g_k.armed_at <= due + kArmSlackNs && !port::timer_interval();
+}
 // The timer signal came: what is armed now (a repeating timer re-armed
 // itself; a one-shot is spent).
 void timer_fired_locked(std::uint64_t now);
@@ -334,10 +350,16 @@ void unready_locked(Tcb* t);
 // Run the most urgent task: switch if it is not the current one (or the
 // current one stopped running). Task or kernel context, mask held.
 void schedule_locked();
+// The same at `now`, a clock reading the caller took in this kernel call
+// (the running task already charged up to it, when accounting is on).
+void schedule_at_locked(std::uint64_t now);
 // After a kernel call made something ready or changed an urgency: let the
 // most urgent task run and deliver what is owed to the caller. No-op outside
 // a task (spawning from main before chm_kernel_run).
 void reschedule_locked();
+// The same with the caller's fresh reading `now` (now_locked() in this
+// call) instead of a second one: it charges up to `now` itself.
+void reschedule_at_locked(std::uint64_t now);
 // True when the current task should give up the CPU now.
 bool must_switch_locked(std::uint64_t now);
 // The decision at an event (timers fired) while a task runs: charges it,
@@ -358,7 +380,16 @@ inline void deliver_pending_locked() {
         (!cur->call_depth || cur->at_cancel_point))
         deliver_pending_slow_locked();
 }
-void charge_current_locked(std::uint64_t now);
+// Charge the running task its CPU time up to `now` (inline: per-switch
+// accounting does it at every switch).
+inline void charge_current_locked(std::uint64_t now) {
+    Tcb* cur = g_k.current;
+    if (!cur) return;
+    const std::uint64_t d = now - g_k.switched_in_at;
+    cur->cpu_ns += d;
+    cur->s.cycle_cpu_ns += d;
+    g_k.switched_in_at = now;
+}
 
 // ---- interrupts (irq/irq.cpp)
 // Deliver every raised, enabled vector to its handler. Mask held; kernel

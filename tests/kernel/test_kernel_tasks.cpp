@@ -180,6 +180,81 @@ TEST_F(Tasks, EndedTasksStayReadableUntilTheirSlotIsReused) {
     EXPECT_EQ(st.state, CHM_TASK_ENDED);
 }
 
+// A spawn leaves the rarely used parts of a recycled TCB as the last task
+// left them (kernel.hpp): a new task in the same slot must still start
+// with no signal handlers and a clean name.
+int g_handler_runs = 0;
+chm_tid_t g_first = CHM_TID_NONE, g_second = CHM_TID_NONE;
+void count_handler(int, void*) { ++g_handler_runs; }
+void installs_handler_and_ends(void*) { EXPECT_EQ(chm_usig_handle(3, count_handler, nullptr), 0); }
+void quiet(void*) {}
+void spawns_into_the_freed_slot(void*) {
+    chm_task_attr_t a;
+    chm_task_attr_init(&a);
+    a.name = "b";
+    a.priority = 0;  // below us: it runs once we end, with signal 3 pending
+    // Slots are reused oldest-freed first: older free slots go by (each
+    // spawned and destroyed, back to the free list's tail) until the first
+    // task's slot comes up.
+    for (int i = 0; i < 40000; ++i) {
+        ASSERT_EQ(chm_task_spawn(&g_second, quiet, nullptr, &a), 0);
+        if ((g_second & 0xffff) == (g_first & 0xffff)) break;
+        ASSERT_EQ(chm_task_destroy(g_second), 0);
+    }
+    ASSERT_EQ(g_second & 0xffff, g_first & 0xffff) << "the first task's slot, taken again";
+    EXPECT_EQ(chm_usig_send(g_second, 3), 0);
+}
+
+TEST_F(Tasks, ARecycledSlotKeepsNoSignalHandlerAndNoNameOfItsLastTask) {
+    start(CHM_SCHED_FIXED);
+    g_handler_runs = 0;
+    g_first = spawn(installs_handler_and_ends, nullptr, "a-longer-name-of-29-characters", 5);
+    spawn(spawns_into_the_freed_slot, nullptr, "spawner", 1);
+    ASSERT_EQ(chm_kernel_run(), 0);
+    EXPECT_EQ(g_handler_runs, 0) << "the slot's last task's handler ran for the new task";
+    chm_task_status_t st;
+    ASSERT_EQ(chm_task_status(g_second, &st), 0);
+    EXPECT_STREQ(st.name, "b");
+    for (std::size_t i = 1; i < sizeof st.name; ++i) EXPECT_EQ(st.name[i], 0) << "byte " << i;
+}
+
+// The scheduler's view of a new task starts clean in a recycled slot: a
+// user scheduler (MUF's operations, wrapped) leaves its scratch fields
+// set when a task is retired, and finds them zero when the next task in
+// that slot is admitted.
+int g_dirty_admits = 0, g_admits = 0;
+int wrap_admit(void* self, chm_sched_task_t* t) {
+    ++g_admits;
+    if (t->key || t->data || t->cycle_cpu_ns || t->release_ns) ++g_dirty_admits;
+    return chm_sched_muf_ops.admit(self, t);
+}
+void wrap_retire(void* self, chm_sched_task_t* t) {
+    chm_sched_muf_ops.retire(self, t);
+    t->key = 0xdead;
+    t->data = &g_dirty_admits;
+}
+
+TEST_F(Tasks, ARecycledSlotStartsWithACleanSchedulerView) {
+    chm_sched_ops_t ops = chm_sched_muf_ops;
+    ops.name = "muf-wrapped";
+    ops.admit = wrap_admit;
+    ops.retire = wrap_retire;
+    start(CHM_SCHED_USER, true, 0, &ops);
+    g_dirty_admits = g_admits = 0;
+    const chm_tid_t first = spawn(quiet, nullptr, "first", 1);
+    ASSERT_EQ(chm_task_destroy(first), 0);
+    chm_tid_t id = CHM_TID_NONE;
+    for (int i = 0; i < 40000; ++i) {  // oldest-freed first: until its slot comes up
+        id = spawn(quiet, nullptr, "next", 1);
+        if ((id & 0xffff) == (first & 0xffff)) break;
+        ASSERT_EQ(chm_task_destroy(id), 0);
+    }
+    ASSERT_EQ(id & 0xffff, first & 0xffff);
+    EXPECT_GE(g_admits, 2);
+    EXPECT_EQ(g_dirty_admits, 0) << "a view admitted with its slot's last task's scratch fields";
+    EXPECT_EQ(chm_kernel_run(), 0);
+}
+
 // A task locked into the CPU runs late through two deadlines; its handler
 // runs once, when it unlocks, and is told both.
 std::vector<chm_deadline_info_t> g_dl_calls;

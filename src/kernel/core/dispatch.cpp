@@ -30,15 +30,6 @@ void mask_not_held(const char* fn) {
     std::abort();
 }
 
-void charge_current_locked(std::uint64_t now) {
-    Tcb* cur = g_k.current;
-    if (!cur) return;
-    const std::uint64_t d = now - g_k.switched_in_at;
-    cur->cpu_ns += d;
-    cur->s.cycle_cpu_ns += d;
-    g_k.switched_in_at = now;
-}
-
 void make_ready_locked(Tcb* t, bool keep_place) {
     if (t->suspend_count) {  // a suspended task's wait ended: stay suspended
         t->state = TaskState::Suspended;
@@ -75,6 +66,13 @@ inline bool may_overtake_locked(const Tcb* head, const Tcb* t) {
     }
 }
 
+// sched_before_locked(t, head) for `head` the scheduler's pick, `t` not
+// queued: under a built-in policy from the key `head` was queued with.
+inline bool runs_before_head_locked(Tcb* t, Tcb* head, std::uint64_t now) {
+    if (g_k.builtin) return g_k.rq.top_strictly_after(rq_key(g_k.policy, &t->s));
+    return sched_before_locked(t, head, now);
+}
+
 // The running task's quanta end at slice_start + k * quantum (sched.h).
 // An end that was not armed (nobody to rotate with until this instant)
 // still counts when an event lands on it exactly: on the virtual clock,
@@ -89,13 +87,13 @@ bool quantum_expired_locked(std::uint64_t now) {
 
 // Arm the end of `t`'s current quantum, but only when a decision there can
 // change anything (tickless): an equal task waits (round robin), or the
-// waiting head may overtake it as time passes.
-void quantum_arm_locked(Tcb* t, std::uint64_t now) {
-    const std::uint64_t q = g_k.cfg.quantum_ns;
-    if (!q || g_k.quantum_due > now) return;
-    g_k.quantum_due = 0;
+// waiting head may overtake it as time passes (quantum_arm_locked). This
+// is its body, for a quantum `q` whose end is not armed (quantum_due 0),
+// inline in the switch, which starts every slice.
+inline __attribute__((always_inline)) void quantum_arm_fresh_locked(Tcb* t, std::uint64_t now,
+                                                                    std::uint64_t q) {
     Tcb* head = sched_pick_locked(now);
-    if (!head || (!may_overtake_locked(head, t) && sched_before_locked(t, head, now))) return;
+    if (!head || (!may_overtake_locked(head, t) && runs_before_head_locked(t, head, now))) return;
     std::uint64_t due = g_k.slice_start + q;
     if (now >= due) due += (now - due) / q * q + q;  // the first end after now
     // A timer due first is a decision point that arms it then: a periodic
@@ -103,7 +101,15 @@ void quantum_arm_locked(Tcb* t, std::uint64_t now) {
     // re-arm per switch.
     if (const TimerNode* top = g_k.timers.top(); top && top->due <= due) return;
     g_k.quantum_due = due;
-    timer_program_locked(now);
+    // The earliest event now; usually an earlier quantum's tick serves it.
+    if (!timer_serves_locked(due, now)) timer_program_locked(now);
+}
+
+void quantum_arm_locked(Tcb* t, std::uint64_t now) {
+    const std::uint64_t q = g_k.cfg.quantum_ns;
+    if (!q || g_k.quantum_due > now) return;
+    g_k.quantum_due = 0;
+    quantum_arm_fresh_locked(t, now, q);
 }
 
 bool must_switch_locked(std::uint64_t now) {
@@ -145,7 +151,7 @@ __attribute__((noinline)) void switch_to_locked(Tcb* next, std::uint64_t now) {
     if (g_k.cfg.cpu_accounting) g_k.switched_in_at = now;
     g_k.slice_start = now;
     g_k.quantum_due = 0;
-    if (next && g_k.cfg.quantum_ns) quantum_arm_locked(next, now);
+    if (const std::uint64_t q = g_k.cfg.quantum_ns; next && q) quantum_arm_fresh_locked(next, now, q);
     ++g_k.switches;
     if (g_k.trace_switch) [[unlikely]] g_k.trace_switch(next, now);
     // Leaving for good (an ended task): no save slot, its fake stack goes.
@@ -182,6 +188,25 @@ inline __attribute__((always_inline)) void requeue_and_switch_locked(Tcb* cur, T
     switch_to_locked(head, now);
 }
 
+// The running task `cur` against the pick `head` under a built-in policy:
+// the decision of schedule_at_locked with one key computed (`head`'s is
+// the one it was queued with) and used again for the requeue.
+inline __attribute__((always_inline)) void decide_builtin_locked(Tcb* cur, Tcb* head, std::uint64_t now) {
+    RqKey k = rq_key(g_k.policy, &cur->s);
+    const bool preempted = g_k.rq.top_before(k);
+    if (!preempted && (g_k.rq.top_strictly_after(k) || !quantum_expired_locked(now))) {
+        quantum_arm_locked(cur, now);
+        return;
+    }
+    if (!preempted) k.seq = cur->s.seq = ++g_k.seq;  // round robin: behind its equals
+    cur->state = TaskState::Ready;
+    cur->in_ready = true;
+    head->in_ready = false;
+    g_k.rq.replace_top(cur, k);
+    head->state = TaskState::Running;
+    switch_to_locked(head, now);
+}
+
 }  // namespace
 
 // Read the clock only when something needs it: per-switch CPU accounting
@@ -194,18 +219,23 @@ inline std::uint64_t schedule_now_locked() {
     return now;
 }
 
-void schedule_locked() {
+void schedule_locked() { schedule_at_locked(schedule_now_locked()); }
+
+void schedule_at_locked(std::uint64_t now) {
     CHM_ASSERT_LOCKED();
     // A priority changed without a switch (set, lent, handler) is published too.
     if (port::g_db_publishes) publish_running_locked();
     g_k.decision_owed = false;
-    const std::uint64_t now = schedule_now_locked();
     Tcb* cur = g_k.current;
     const bool cur_runs = cur && cur->state == TaskState::Running;
     if (cur_runs && cur->lock_nest) return;
     Tcb* head = sched_pick_locked(now);
     if (cur_runs) {
         if (!head) return;
+        if (g_k.builtin) {  // a running task is neither queued nor suspended
+            decide_builtin_locked(cur, head, now);
+            return;
+        }
         if (sched_before_locked(head, cur, now)) {
             requeue_and_switch_locked(cur, head, true, now);  // preempted
             return;
@@ -325,7 +355,7 @@ void deliver_pending_slow_locked() {
         const int signo = __builtin_ctz(sigs);
         cur->sig_pending &= ~(1u << signo);
         ++cur->sigs_taken;
-        chm_usig_handler_t h = cur->sig_handler[signo];
+        chm_usig_handler_t h = cur->sig_handled & (1u << signo) ? cur->sig_handler[signo] : nullptr;
         if (h) {
             void* a = cur->sig_arg[signo];
             port::irq_restore();
@@ -340,6 +370,13 @@ void reschedule_locked() {
     // (the tick that ran it checks must_switch_locked).
     if (!g_k.current || g_k.in_irq) return;
     schedule_locked();
+    deliver_pending_locked();
+}
+
+void reschedule_at_locked(std::uint64_t now) {
+    if (!g_k.current || g_k.in_irq) return;
+    if (g_k.cfg.cpu_accounting) charge_current_locked(now);
+    schedule_at_locked(now);
     deliver_pending_locked();
 }
 

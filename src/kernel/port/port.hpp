@@ -115,8 +115,8 @@ inline void call_indirect_return(void (*fn)()) { fn(); }
 // signal handler. It may trail or lead CLOCK_MONOTONIC by well under a
 // microsecond (posix/clock.cpp: extrapolated with the cycle counter where
 // the arch has one, CHM_PORT_HAS_CYCLE_COUNTER and cycle_counter() in
-// arch.hpp).
-std::uint64_t now_ns();
+// arch.hpp). Inline (posix/clock_fast.hpp, included at the end).
+//   std::uint64_t now_ns();
 // CLOCK_MONOTONIC read now, and now_ns() continues from it: for judging
 // timer expiries against the clock that fired them. Never trails
 // CLOCK_MONOTONIC; since the thread's clock never goes back, it returns the
@@ -193,8 +193,10 @@ int timer_init(TickHandler handler);
 // re-arm after the tick). Replaces any earlier setting. Task or kernel
 // context, mask held.
 void timer_arm_locked(std::uint64_t at_ns, std::uint64_t interval_ns = 0);
-// The interval of the last arming (0: one-shot or disarmed).
-std::uint64_t timer_interval();
+// The interval of the last arming (0: one-shot or disarmed). Read inline
+// at every quantum's arming (kernel thread only).
+inline std::uint64_t g_timer_interval = 0;
+inline std::uint64_t timer_interval() { return g_timer_interval; }
 
 // Tear the timer down (process exit, tests).
 void timer_fini();
@@ -412,3 +414,6 @@ void idle_wake();
 // target in <arch>/fault.cpp, redirect_to_call_from_signal. Documented
 // entry by entry in fault.hpp.
 #include "fault.hpp"
+
+// now_ns(), inline (the clock section above).
+#include "posix/clock_fast.hpp"

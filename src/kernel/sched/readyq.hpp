@@ -109,6 +109,13 @@ public:
     Tcb* top() const;
     // The top sorts after `k` (size() > 0).
     bool top_after(const RqKey& k) const { return less(node(k, 0), nodes_[0]); }
+    // The policy's `before` between the top and a task keyed `k`, arrival
+    // ignored (size() > 0), from the key the top was queued with: it is
+    // the key its view gives now (a waiting task's key is constant and
+    // every change re-queues it), so the dispatcher computes one key per
+    // decision instead of two.
+    bool top_before(const RqKey& k) const { return less_by_policy(nodes_[0], node(k, 0)); }
+    bool top_strictly_after(const RqKey& k) const { return less_by_policy(node(k, 0), nodes_[0]); }
     Tcb* at(std::size_t i) const;
     std::size_t size() const { return size_; }
     bool contains(const Tcb* t) const;
@@ -123,6 +130,9 @@ private:
         if (a.major != b.major) return a.major < b.major;
         if (a.minor != b.minor) return a.minor < b.minor;
         return a.seq < b.seq;
+    }
+    static bool less_by_policy(const Node& a, const Node& b) {
+        return a.major != b.major ? a.major < b.major : a.minor < b.minor;
     }
     static Node node(const RqKey& k, std::uint32_t idx) { return Node{k.major, k.seq, k.minor, idx}; }
     void sift_up(std::size_t i, Node x);

@@ -18,6 +18,7 @@ int chm_usig_handle(int signo, chm_usig_handler_t handler, void* arg) {
     if (!cur) return record_failure(-EPERM, "chm_usig_handle");
     cur->sig_handler[signo] = handler;
     cur->sig_arg[signo] = arg;
+    cur->sig_handled |= 1u << signo;
     return 0;
 }
 

@@ -39,7 +39,7 @@ Tcb* slot_take_locked() {
     }
     Tcb* t = &g_k.tcbs[i];
     const std::uint64_t gen = t->gen;  // 0 for a slot never used
-    new (t) Tcb();
+    new (t) Tcb;  // default-initialised: the fields valid only under a flag are left (kernel.hpp)
     t->gen = gen + 1;  // never wraps: slot_release_locked retires a slot at kGenMax
     t->index = i;
     t->short_id = tid_short(tid_of(t));  // no 64-bit division per switch
@@ -205,7 +205,7 @@ int chm_task_spawn(chm_tid_t* out, void (*entry)(void*), void* arg, const chm_ta
     t->stack_size = stack;
     t->entry = entry;
     t->arg = arg;
-    std::strcpy(t->name, a.name ? a.name : "task");
+    std::strncpy(t->name, a.name ? a.name : "task", sizeof t->name);  // zero-padded: status copies it whole
     t->s.id = tid_of(t);
     t->s.priority = a.priority;
     t->s.critical = a.critical;
@@ -242,7 +242,7 @@ int chm_task_spawn(chm_tid_t* out, void (*entry)(void*), void* arg, const chm_ta
         make_ready_locked(t);
     }
     if (out) *out = tid_of(t);
-    reschedule_locked();  // the new task may be more urgent than its parent
+    reschedule_at_locked(now);  // the new task may be more urgent than its parent
     return 0;
 }
 

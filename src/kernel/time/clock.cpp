@@ -8,7 +8,6 @@
 namespace chm::kernel {
 
 namespace {
-constexpr std::uint64_t kArmSlackNs = 1000;  // far below a timer signal's latency
 constexpr std::uint64_t kMinRepeatNs = 50000;  // shortest interval worth repeating
 }  // namespace
 

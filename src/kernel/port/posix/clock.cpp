@@ -50,16 +50,8 @@ std::atomic<int> g_mode{kUnknown};
 std::uint64_t g_anchor_cycles, g_anchor_ns, g_rebase_cycles;
 unsigned __int128 g_first_mult;  // ns per cycle << 32, from the calibration
 
-// Per thread: the interval's start, its rate (ns per cycle << 32) and the
-// last value returned (never less again). `gen` is odd while a rebase is
-// under way and changes with each: a reading interrupted by a signal
-// handler that rebased reads again, and a handler that lands inside a
-// rebase reads the clock directly.
-struct Interval {
-    std::uint64_t cycles = 0, ns = 0, last = 0, mult = 0;
-    std::uint32_t gen = 0;
-};
-__attribute__((tls_model("initial-exec"))) thread_local Interval t_iv;
+// Per thread (clock_fast.hpp): the interval now_ns() extrapolates from.
+using clock_detail::Interval;
 
 // The counter at the middle of a clock reading, and that reading.
 bool read_pair(std::uint64_t* cycles, std::uint64_t* ns) {
@@ -122,6 +114,7 @@ std::uint64_t rebase(Interval& iv) {
                                           : std::uint64_t(g_first_mult);
     iv.cycles = c;
     iv.ns = n;
+    iv.limit = g_rebase_cycles;
     if (n > iv.last) iv.last = n;
     const std::uint64_t t = iv.last;
     __atomic_signal_fence(__ATOMIC_SEQ_CST);
@@ -133,7 +126,12 @@ std::uint64_t rebase(Interval& iv) {
 
 }  // namespace
 
-std::uint64_t now_ns() {
+namespace clock_detail {
+
+constinit __attribute__((tls_model("initial-exec"))) thread_local Interval t_iv;
+
+// now_ns()'s fast path is inline (clock_fast.hpp); here the rest.
+std::uint64_t now_slow() {
 #if CHM_PORT_HAS_CYCLE_COUNTER
     if (g_mode.load(std::memory_order_acquire) == kCounter) [[likely]] {
         Interval& iv = t_iv;
@@ -157,10 +155,12 @@ std::uint64_t now_ns() {
     return monotonic();
 }
 
+}  // namespace clock_detail
+
 std::uint64_t now_exact_ns() {
 #if CHM_PORT_HAS_CYCLE_COUNTER
     if (g_mode.load(std::memory_order_acquire) == kCounter) {
-        Interval& iv = t_iv;
+        Interval& iv = clock_detail::t_iv;
         if (!(iv.gen & 1)) return rebase(iv);
     }
 #endif

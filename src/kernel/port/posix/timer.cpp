@@ -27,7 +27,6 @@ std::uint32_t g_stray = 0;
 // initial-exec: no lazy TLS allocation inside the handler.
 __attribute__((tls_model("initial-exec"))) thread_local bool t_kernel_thread = false;
 
-std::uint64_t g_interval = 0;  // of the last timer_arm_locked (kernel thread only)
 std::uint32_t g_deferred = 0;
 unsigned g_defer_streak = 0;  // consecutive deferrals: backs the retry off
 
@@ -172,17 +171,15 @@ void timer_arm_locked(std::uint64_t at_ns, std::uint64_t interval_ns) {
     } else {
         interval_ns = 0;
     }
-    g_interval = interval_ns;
+    g_timer_interval = interval_ns;
     timer_settime(g_timer, TIMER_ABSTIME, &its, nullptr);
 }
-
-std::uint64_t timer_interval() { return g_interval; }
 
 void timer_fini() {
     if (!g_timer_live) return;
     timer_delete(g_timer);
     g_timer_live = false;
-    g_interval = 0;
+    g_timer_interval = 0;
     g_tick = nullptr;
     t_kernel_thread = false;
     g_kernel_tid = 0;
