@@ -86,12 +86,13 @@ namespace {
 
 void restart_aborted_cycle_locked(Tcb* cur) {
     // Restart the entry from the top, on this same stack. context_init
-    // writes the entry frame just under the stack's top, and the switch
-    // saves this context's registers just under the stack pointer; an
-    // aborted cycle's frames can be shallow (the entry's tail calls left
-    // a few hundred bytes on aarch64, where each of those two areas is
-    // 176), so the save would overwrite the new frame and the restarted
-    // entry be called with a garbage argument. Step below the top
+    // writes the entry frame just under the stack's top; this function's
+    // own frame and the switch's save area lie just under the stack
+    // pointer. An aborted cycle's frames can be shallow (an entry that
+    // tail-called the aborted call left 160 bytes on aarch64, whose entry
+    // frame is 176), and then the switch stored the old stack pointer
+    // into a local that overlapped the new frame's argument slot: the
+    // restarted entry got a garbage argument. Step below the top
     // kMinStack bytes first: nothing of ours is written there after the
     // frame, and none of these frames is returned to.
     cur->abort_cycle = false;
