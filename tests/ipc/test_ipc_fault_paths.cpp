@@ -23,7 +23,22 @@ namespace {
 chm_msgq_t* g_q;
 chm_rsem_t* g_s;
 
-class IpcFaultPaths : public FaultTest {};
+class IpcFaultPaths : public FaultTest {
+protected:
+    // RTPU 1 in a forked child, "fq" open in g_q (and "fs" in g_s with
+    // `sem`), running one task `fn`: the child's exit status once its
+    // kernel stopped.
+    int run_one_task(void (*fn)(void*), const char* name, int prio, bool sem = false) {
+        const std::string path = path_;
+        const pid_t child = spawn([path, fn, name, prio, sem] {
+            return run_rtpu(path, 1, [fn, name, prio, sem] {
+                if (chm_msgq_open("fq", &g_q) || (sem && chm_rsem_open("fs", &g_s))) _exit(101);
+                spawn_task(fn, nullptr, name, prio, 0);
+            });
+        });
+        return reap(child);
+    }
+};
 
 }  // namespace
 }  // namespace chm::test
@@ -246,14 +261,7 @@ TEST_F(IpcFaultPaths, AReturnToAnErrorMarkFromInsideACallGivesItsLockBack) {
     g_marked = mk;
     chm_msgq_t* q = nullptr;
     ASSERT_NO_FATAL_FAILURE(attach_with_queue(&q));
-    const std::string path = path_;
-    const pid_t child = spawn([path] {
-        return run_rtpu(path, 1, [] {
-            if (chm_msgq_open("fq", &g_q)) _exit(101);
-            spawn_task(marked_sender, nullptr, "marked", 20, 0);
-        });
-    });
-    EXPECT_EQ(reap(child), 0);
+    EXPECT_EQ(run_one_task(marked_sender, "marked", 20), 0);
     EXPECT_EQ(mk->jumped.load(), 1) << "the fault did not return to the mark";
     EXPECT_EQ(mk->result.load(), 0) << "the task's next send after the jump";
     std::printf("the next send after the jump: %.1f us\n", double(mk->next_ns.load()) / 1e3);
@@ -309,14 +317,7 @@ TEST_F(IpcFaultPaths, ABadUserBufferFaultsBeforeTheQueueIsLocked) {
     g_bad = bb;
     chm_msgq_t* q = nullptr;
     ASSERT_NO_FATAL_FAILURE(attach_with_queue(&q));
-    const std::string path = path_;
-    const pid_t child = spawn([path] {
-        return run_rtpu(path, 1, [] {
-            if (chm_msgq_open("fq", &g_q)) _exit(101);
-            spawn_task(bad_buffer_user, nullptr, "badbuf", 20, 0);
-        });
-    });
-    EXPECT_EQ(reap(child), 0);
+    EXPECT_EQ(run_one_task(bad_buffer_user, "badbuf", 20), 0);
     EXPECT_EQ(bb->jumps.load(), 2) << "both calls faulted back to the mark";
     EXPECT_EQ(bb->sent.load(), 0);
     EXPECT_EQ(bb->received.load(), int(sizeof(std::uint32_t)));
@@ -383,14 +384,7 @@ TEST_F(IpcFaultPaths, AnEndHooksOwnCallDoesNotEndTheTaskAgain) {
     ASSERT_NO_FATAL_FAILURE(attach_with_queue(&q));
     chm_rsem_t* s = nullptr;
     ASSERT_NO_FATAL_FAILURE(make_sem(&s));
-    const std::string path = path_;
-    const pid_t child = spawn([path] {
-        return run_rtpu(path, 1, [] {
-            if (chm_msgq_open("fq", &g_q) || chm_rsem_open("fs", &g_s)) _exit(101);
-            spawn_task(hooked_driver, nullptr, "driver", 10, 0);
-        });
-    });
-    EXPECT_EQ(reap(child), 0);
+    EXPECT_EQ(run_one_task(hooked_driver, "driver", 10, true), 0);
     EXPECT_EQ(h->end_reason.load(), int(CHM_TASK_DESTROYED));
     EXPECT_EQ(h->runs.load(), 1) << "the end hook ran more than once";
     EXPECT_EQ(h->finished.load(), 1) << "the end hook was cut short at its own call's return";
