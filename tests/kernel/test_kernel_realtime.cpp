@@ -213,13 +213,13 @@ void libc_hammer(void* arg) {
 }
 
 // The allocator's calls into the C library: where the compiler cannot
-// call through the GOT (m68k has no -fno-plt), they go through call stubs
-// in the program's own text. A task preempted on such a stub inside a
+// call through the GOT (m68k has no -fno-plt), they go through PLT entries
+// in the program's own text. A task preempted on such an entry inside a
 // malloc the C library made with a FILE's lock held left that lock to the
 // next task (lost stdio lines in CLibraryIsSafeUnderPreemption, m68k).
-// In a non-PIE program the address of an imported function is its stub;
+// In a non-PIE program the address of an imported function is its PLT entry;
 // elsewhere it is the library's own code: not preemptible either way.
-TEST_F(RealTime, TheAllocatorsCallStubsAreNotPreemptible) {
+TEST_F(RealTime, TheAllocatorsPltEntriesAreNotPreemptible) {
     REQUIRE_PREEMPTION();
     start(CHM_SCHED_FIXED, false, 50 * kUs);
     using Fn = const void*;

@@ -126,10 +126,10 @@ int chm_kernel_init(const chm_kernel_config_t* cfg) {
         if (alloc.lo < alloc.hi) {
             port::irq_disable();
             port::preemptible_range_exclude(alloc.lo, alloc.hi);
-            // Its calls into the C library, where they go through stubs in
+            // Its calls into the C library, where they go through PLT entries in
             // the object's own text (m68k: no -fno-plt). Unreadable file:
-            // the stubs stay preemptible, as before.
-            (void)port::preemptible_exclude_call_stubs(reinterpret_cast<const void*>(alloc.lo));
+            // the entries stay preemptible, as before.
+            (void)port::preemptible_exclude_plt(reinterpret_cast<const void*>(alloc.lo));
             port::irq_restore();
         }
     } else {

@@ -21,7 +21,7 @@
 //  * each source file is compiled without PLT stubs (the pragma at its top),
 //    because a statically linked program's stubs lie in its own text;
 //    where the compiler ignores that (m68k), the port carves the program's
-//    stubs out of the preemptible code (port/posix/plt_ranges.cpp);
+//    PLT entries out of the preemptible code (port/posix/plt_ranges.cpp);
 //  * the C library and the system calls it reaches are not preemptible.
 #pragma once
 

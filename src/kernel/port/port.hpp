@@ -288,13 +288,13 @@ void preemptible_range_remove(std::uintptr_t lo, std::uintptr_t hi);
 // preempted although it lives in the main program: the allocator, which
 // libc calls with its own locks held).
 int preemptible_range_exclude(std::uintptr_t lo, std::uintptr_t hi);
-// Carve the call stubs (PLT) of the loaded object holding `addr` out of
+// Carve the PLT entries of the loaded object holding `addr` out of
 // every preemptible range: the allocator's calls into the C library go
 // through them where the compiler has no -fno-plt (m68k). Returns the
-// number of stub sections carved out, -ENOENT when no loaded object holds
+// number of PLT sections carved out, -ENOENT when no loaded object holds
 // `addr`, -errno when its file cannot be read, -ENOEXEC when the file is
 // not an ELF object of this class. Mask held.
-int preemptible_exclude_call_stubs(const void* addr);
+int preemptible_exclude_plt(const void* addr);
 bool preemptible_pc_from_signal(std::uintptr_t pc);
 // Add (remove) every executable segment of the loaded object that contains
 // `addr` (a control program, or libchimera.so itself). Returns the number

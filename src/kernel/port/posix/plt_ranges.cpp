@@ -1,17 +1,17 @@
-// The call stubs (PLT) of a loaded object, carved out of the preemptible
+// The PLT entries of a loaded object, carved out of the preemptible
 // ranges. Where the compiler cannot call a shared library through its GOT
 // (-fno-plt is honoured on x86-64 and aarch64, not on m68k), the
-// allocator's calls to memset, memcpy, errno and syscall go through stubs
+// allocator's calls to memset, memcpy, errno and syscall go through PLT entries
 // in the executable's own text, which is preemptible. A task preempted on
-// such a stub inside a malloc that the C library made with a FILE's lock
+// such an entry inside a malloc that the C library made with a FILE's lock
 // held leaves that lock to the next task on the thread (glibc's locks are
 // recursive per OS thread): seen as lost stdio lines under a 50 us quantum
-// on m68k. A stub does no work of its own, so deferring a preemption that
+// on m68k. A PLT entry does no work of its own, so deferring a preemption that
 // lands there costs nothing but the retry.
 //
-// The stubs are found from the object's section headers (.plt, .plt.sec,
+// The entries are found from the object's section headers (.plt, .plt.sec,
 // .plt.got, .iplt), read from its file once at kernel start; program
-// headers alone do not tell the stubs from the code around them.
+// headers alone do not tell the entries from the code around them.
 #include "port.hpp"
 
 #include <algorithm>
@@ -51,14 +51,14 @@ bool read_at(int fd, void* to, std::size_t n, off_t at) {
     return ::pread(fd, to, n, at) == static_cast<ssize_t>(n);
 }
 
-bool is_stub_section(const char* name) {
+bool is_plt_section(const char* name) {
     return std::strcmp(name, ".plt") == 0 || std::strcmp(name, ".plt.sec") == 0 ||
            std::strcmp(name, ".plt.got") == 0 || std::strcmp(name, ".iplt") == 0;
 }
 
 }  // namespace
 
-int preemptible_exclude_call_stubs(const void* addr) {
+int preemptible_exclude_plt(const void* addr) {
     Found f{reinterpret_cast<std::uintptr_t>(addr)};
     dl_iterate_phdr(find_object, &f);
     if (!f.file) return -ENOENT;
@@ -85,7 +85,7 @@ int preemptible_exclude_call_stubs(const void* addr) {
                 const ssize_t got = ::pread(fd, buf, n, off_t(names.sh_offset + sh.sh_name));
                 if (got <= 0) continue;
                 buf[got] = '\0';
-                if (!is_stub_section(buf)) continue;
+                if (!is_plt_section(buf)) continue;
                 const std::uintptr_t lo = f.base + sh.sh_addr;
                 preemptible_range_exclude(lo, lo + sh.sh_size);
                 ++carved;
