@@ -38,7 +38,7 @@ pthread_once_t g_once = PTHREAD_ONCE_INIT;
 bool g_monitor_paused = false;
 void before_fork() {
     if (!g_attached.load(R)) return;
-    monitor_stop();
+    monitor_stop(/*before_fork=*/true);
     g_monitor_paused = true;
 }
 void after_fork_parent() {

@@ -499,7 +499,14 @@ bool joining_abandon(const View& v, std::uint32_t slot, std::uint32_t st, std::u
 
 // The monitor thread of the current attachment.
 int monitor_start(Attachment* a);
-void monitor_stop();
+// Stops the thread and joins it. `before_fork`: also waits (at most
+// kThreadGoneNs) until the OS no longer has the thread. Under qemu-user a
+// guest's pthread_join returns when the exiting thread clears its tid
+// word, before that thread's host side has freed its state; a fork in
+// that window copied the emulator's allocator lock held, and the child
+// hung in its first translation (tests/ipc/test_ipc_bounds.cpp, about 1
+// run in 16 under load).
+void monitor_stop(bool before_fork = false);
 // In a forked child: the thread does not exist there; drop its state.
 void monitor_forget_after_fork();
 

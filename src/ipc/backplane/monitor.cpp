@@ -11,6 +11,7 @@
 #include <cerrno>
 #include <csignal>
 #include <cstring>
+#include <ctime>
 
 #include <poll.h>
 #include <pthread.h>
@@ -19,6 +20,7 @@
 #include <unistd.h>
 
 #include "ipc/backplane/backplane.hpp"
+#include "port.hpp"
 
 namespace chm::bp {
 
@@ -30,6 +32,9 @@ constexpr int kPeriodMs = 10;
 // may), so the heartbeat, the other slots and monitor_stop are never held
 // up longer.
 constexpr std::uint64_t kAttemptNs = 100'000'000;
+// monitor_stop(before_fork): how long it waits for the joined thread to be
+// gone from the OS (natively microseconds after the join).
+constexpr std::uint64_t kThreadGoneNs = 1'000'000'000;
 
 struct Watch {
     std::uint32_t status = 0;  // the status this watch was opened for
@@ -45,6 +50,7 @@ struct Monitor {
     int wake_fd = -1;
     bool running = false;
     std::atomic<bool> stop{false};  // monitor_stop: ends the thread's lock waits too (WaitBound)
+    std::atomic<int> os_tid{0};     // the thread's kernel id, set by the thread itself
     bool no_pidfd = false;
     Watch w[kMaxSlots];
 };
@@ -142,8 +148,24 @@ void scan(Monitor& m) {
     }
 }
 
+// Does this process still have OS thread `tid`? (tgkill with signal 0:
+// ESRCH once the thread has finished exiting.)
+bool thread_exists(int tid) {
+    return ::syscall(SYS_tgkill, ::getpid(), tid, 0) == 0 || errno != ESRCH;
+}
+
+void wait_thread_gone(int tid) {
+    if (tid <= 0) return;
+    const std::uint64_t end = port::now_ns() + kThreadGoneNs;
+    while (thread_exists(tid) && port::now_ns() < end) {
+        const timespec nap{0, 100'000};
+        ::nanosleep(&nap, nullptr);
+    }
+}
+
 void* run(void*) {
     Monitor& m = g_mon;
+    m.os_tid.store(int(::syscall(SYS_gettid)), std::memory_order_relaxed);
     pollfd fds[kMaxSlots + 1];
     std::uint32_t who[kMaxSlots + 1];
     const WaitBound stoppable(UINT64_MAX, &m.stop);
@@ -196,7 +218,7 @@ int monitor_start(Attachment* a) {
     return 0;
 }
 
-void monitor_stop() {
+void monitor_stop(bool before_fork) {
     Monitor& m = g_mon;
     if (!m.running) return;
     // The flag ends a lock wait of the thread within one polling interval
@@ -207,6 +229,8 @@ void monitor_stop() {
     const std::uint64_t one = 1;
     (void)!::write(m.wake_fd, &one, sizeof one);
     ::pthread_join(m.thread, nullptr);
+    if (before_fork) wait_thread_gone(m.os_tid.load(std::memory_order_relaxed));
+    m.os_tid.store(0, std::memory_order_relaxed);
     ::close(m.wake_fd);
     m.wake_fd = -1;
     for (auto& w : m.w) forget(w);
