@@ -11,6 +11,7 @@
 #include "chimera/err.h"
 #include "chimera/kernel.h"
 #include "ipc/servo/host.hpp"
+#include "lib/hot.hpp"
 
 namespace chm::servo {
 
@@ -63,7 +64,7 @@ void withdraw_switched_on(chm_module* m) {
     m->state.store(CHM_SERVO_OFF);
 }
 
-void cycle_task(void* arg) {
+CHM_HOT void cycle_task(void* arg) {
     auto* m = static_cast<chm_module*>(arg);
     (void)chm_err_on_task(record_cycle_error, m);
     (void)chm_task_on_end(on_cycle_end, m);
@@ -108,7 +109,7 @@ void cycle_task(void* arg) {
         if (first) m->switched_at = r, first = false;
         if (m->pending_mask.load(std::memory_order_relaxed)) apply_pending(m);
         m->release_now = r;
-        (void)chm_svar_set_read(m->set);  // -EAGAIN: an input keeps its last value
+        (void)svar::set_copy_in(m->set);  // -EAGAIN: an input keeps its last value
         const int rc = m->desc->cycle(m);
         m->release_now = 0;
         if (rc != 0 || m->missed_error.load()) {
@@ -119,7 +120,7 @@ void cycle_task(void* arg) {
             run_entry(m, kEntryError, rc ? rc : ETIME);
             return;
         }
-        (void)chm_svar_set_write(m->set);
+        (void)svar::set_copy_out(m->set);
         ++m->cycles;
         chm_task_wait_period();
     }

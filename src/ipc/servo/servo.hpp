@@ -103,26 +103,28 @@ int serve(const char* req, std::uint32_t len, char* rep, std::uint32_t room, std
 }  // namespace chm::servo
 
 // An instance, as module code sees it (chm_module_t) and the host keeps it.
-struct chm_module {
-    bool used = false;
-    std::uint32_t gen = 0;
-    int index = 0;
-    char name[chm::servo::kNameLen] = {};
-    void* dl = nullptr;
+// The first cache line holds what every cycle reads or writes (cycle.cpp):
+// a cycle usually begins with cold caches, its task having slept a period,
+// and each further line it touches is a miss.
+struct alignas(64) chm_module {
+    // ---- per cycle
     const chm_module_desc_t* desc = nullptr;
     chm_svar_set_t* set = nullptr;
-    void* state_mem = nullptr;
-    double params[CHM_MODULE_PARAMS_MAX] = {};
-    double pending[CHM_MODULE_PARAMS_MAX] = {};
     std::atomic<std::uint32_t> pending_mask{0};  // bit i: pending[i] waits for the next cycle
-    std::uint64_t period_ns = 0, deadline_ns = 0, wcet_ns = 0;
-    int critical = 0, priority = 0, miss_policy = 0;
-    std::atomic<int> state{CHM_SERVO_NONE};
+    // A module switched on: its cycle task and a resolve (aborted) race to
+    // decide what happens to it, by CAS from kArmed.
+    enum : int { kNotArmed = 0, kArmed, kActing, kCancelled };
+    std::atomic<int> sw_arm{kNotArmed};
     // The cycle task stops at its first release >= the armed instant. Two
     // words, not a 64-bit atomic (m68k has none lock-free): the instant is
     // written while the flag is clear, and read only when it is set.
     std::atomic<std::uint32_t> off_armed{0};
+    std::atomic<bool> missed_error{false};  // a miss under CHM_SERVO_MISS_ERROR
+    // off_time was armed by a switch (not by kill/teardown): the module
+    // stops there only if that switch was committed.
+    std::atomic<bool> off_by_switch{false};
     std::uint64_t off_time = 0;
+    std::uint64_t cycles = 0, release_now = 0;
     void arm_off(std::uint64_t t) {
         off_armed.store(0, std::memory_order_relaxed);
         std::atomic_signal_fence(std::memory_order_seq_cst);
@@ -130,6 +132,19 @@ struct chm_module {
         if (t) off_armed.store(1, std::memory_order_release);
     }
     std::uint64_t off_at() const { return off_armed.load(std::memory_order_acquire) ? off_time : 0; }
+
+    // ---- the rest
+    bool used = false;
+    std::uint32_t gen = 0;
+    int index = 0;
+    char name[chm::servo::kNameLen] = {};
+    void* dl = nullptr;
+    void* state_mem = nullptr;
+    double params[CHM_MODULE_PARAMS_MAX] = {};
+    double pending[CHM_MODULE_PARAMS_MAX] = {};
+    std::uint64_t period_ns = 0, deadline_ns = 0, wcet_ns = 0;
+    int critical = 0, priority = 0, miss_policy = 0;
+    std::atomic<int> state{CHM_SERVO_NONE};
     std::uint64_t on_at = 0;                // committed first release
     // The switch that turns this module on, and the one that turns it off
     // (alone or handed over): its decision cell, and the outcome once known
@@ -141,16 +156,10 @@ struct chm_module {
         std::atomic<std::uint32_t> cell{~0u}, seq{0}, outcome{0};
     };
     SwitchSlot on_sw, off_sw;
-    // A module switched on: its cycle task and a resolve (aborted) race to
-    // decide what happens to it, by CAS from kArmed.
-    enum : int { kNotArmed = 0, kArmed, kActing, kCancelled };
-    std::atomic<int> sw_arm{kNotArmed};
-    // off_time was armed by a switch (not by kill/teardown): the module
-    // stops there only if that switch was committed.
-    std::atomic<bool> off_by_switch{false};
     chm_tid_t cycle_task = CHM_TID_NONE;
     bool cycle_done = false;                // the cycle task left its loop itself
-    std::atomic<bool> missed_error{false};  // a miss under CHM_SERVO_MISS_ERROR
-    std::uint64_t cycles = 0, misses = 0, worst_ns = 0, switched_at = 0, release_now = 0;
+    std::uint64_t misses = 0, worst_ns = 0, switched_at = 0;
     char last_error[160] = {};
 };
+static_assert(offsetof(chm_module, release_now) + sizeof(std::uint64_t) <= 64,
+              "the per-cycle fields share one cache line");

@@ -25,6 +25,7 @@
 #include "ipc/err/report.hpp"
 #include "ipc/svar/svar.hpp"
 #include "kernel/task/holds.hpp"
+#include "lib/hot.hpp"
 
 using namespace chm::ipc::svar;
 namespace bp = chm::bp;
@@ -299,7 +300,7 @@ int create_impl(const char* owner, const char* const* inputs, size_t n_in, const
     return 0;
 }
 
-int read_impl(chm_svar_set* s) {
+CHM_HOT int read_impl(chm_svar_set* s) {
     int r = 0;
     for (std::uint32_t k = 0; k < s->n_in; ++k) {
         const SetVar& v = s->vars[k];
@@ -327,7 +328,7 @@ int set_claim_for_switch(chm_svar_set* s, const char* const* displace, std::size
     return claim_outputs(s, displace, n_displace, since, r);
 }
 
-int set_displaced_by(const chm_svar_set* s, std::uint64_t release, DecisionRef* by) {
+CHM_HOT int set_displaced_by(const chm_svar_set* s, std::uint64_t release, DecisionRef* by) {
     if (!s->claims_held.load(std::memory_order_relaxed)) return 0;
     for (std::uint32_t k = 0; k < s->n_out; ++k) {
         const Entry* e = s->vars[s->n_in + k].e;
@@ -339,6 +340,17 @@ int set_displaced_by(const chm_svar_set* s, std::uint64_t release, DecisionRef* 
         const std::uint32_t cell = e->switch_cell.load(Acq);
         *by = cell ? DecisionRef{cell - 1, e->switch_seq.load(Acq)} : DecisionRef{};
         return 1;
+    }
+    return 0;
+}
+
+CHM_HOT int set_copy_in(chm_svar_set* s) { return read_impl(s); }
+
+CHM_HOT int set_copy_out(chm_svar_set* s) {
+    if (s->n_out && !s->claims_held.load(std::memory_order_relaxed)) return -EPERM;
+    for (std::uint32_t k = 0; k < s->n_out; ++k) {
+        SetVar& v = s->vars[s->n_in + k];
+        write_value(v.e, v.buf0, v.stride, v.bytes, v.local);
     }
     return 0;
 }
@@ -444,14 +456,10 @@ int chm_svar_set_write(chm_svar_set_t* set) {
         return chm::ipc::leave((bp::set_error("chm_svar_set_write %s: its backplane attachment is gone", set->owner),
                                 -ENOTCONN),
                                "chm_svar_set_write");
-    if (set->n_out && !set->claims_held.load(std::memory_order_relaxed))
+    if (chm::ipc::svar::set_copy_out(set) == -EPERM)
         return chm::ipc::leave((bp::set_error("chm_svar_set_write %s: the set holds no claim on its outputs", set->owner),
                                 -EPERM),
                                "chm_svar_set_write");
-    for (std::uint32_t k = 0; k < set->n_out; ++k) {
-        SetVar& v = set->vars[set->n_in + k];
-        write_value(v.e, v.buf0, v.stride, v.bytes, v.local);
-    }
     return 0;
 }
 

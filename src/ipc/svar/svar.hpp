@@ -206,6 +206,13 @@ int set_displaced_by(const chm_svar_set* s, std::uint64_t release, DecisionRef* 
 // Switch `r` was aborted: take back every output of `s` that its claim
 // took (or that is free), under the table lock. 0, or as chm_svar_set_claim.
 int set_reclaim_after_abort(chm_svar_set* s, DecisionRef r);
+// A module's copy-in and copy-out at each cycle (servo/cycle.cpp): what
+// chm_svar_set_read and chm_svar_set_write do, without their per-call
+// argument and attachment checks (the framework made the set, and the
+// RTPU's attachment outlives the module), so a cycle touches no more
+// code and data than the copies need. Same results (-EAGAIN, -EPERM).
+int set_copy_in(chm_svar_set* s);
+int set_copy_out(chm_svar_set* s);
 
 }  // namespace chm::ipc::svar
 // Its backplane hooks (svar_check, svar_validate, svar_recover) are

@@ -10,6 +10,7 @@
 #include "chimera/svar.h"
 #include "ipc/svar/svar.hpp"
 #include "kernel/task/holds.hpp"
+#include "lib/hot.hpp"
 
 namespace chm::ipc::svar {
 
@@ -214,7 +215,7 @@ void unlock(const Table& t) {
     kernel::call_leave();  // what was owed meanwhile happens here
 }
 
-int read_value(const Entry* e, const char* buf0, std::uint32_t stride, std::uint32_t bytes, void* dst) {
+CHM_HOT int read_value(const Entry* e, const char* buf0, std::uint32_t stride, std::uint32_t bytes, void* dst) {
     for (unsigned attempt = 0; attempt < kReadAttempts; ++attempt) {
         const std::uint32_t n = e->latest.load(Acq);
         const std::uint32_t b = n & 1;
@@ -227,7 +228,7 @@ int read_value(const Entry* e, const char* buf0, std::uint32_t stride, std::uint
     return -EAGAIN;
 }
 
-void write_value(Entry* e, char* buf0, std::uint32_t stride, std::uint32_t bytes, const void* src) {
+CHM_HOT void write_value(Entry* e, char* buf0, std::uint32_t stride, std::uint32_t bytes, const void* src) {
     const std::uint32_t n = e->latest.load(R) + 1;  // the one writer: nobody else moves it
     const std::uint32_t b = n & 1;
     e->bseq[b].store(2 * n + 1, R);

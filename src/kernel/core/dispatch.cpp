@@ -10,6 +10,7 @@
 #include "core/fiber_asan.hpp"
 #include "kernel.hpp"
 #include "sync/remote_wait.hpp"
+#include "lib/hot.hpp"
 
 namespace chm::kernel {
 
@@ -30,7 +31,7 @@ void mask_not_held(const char* fn) {
     std::abort();
 }
 
-void make_ready_locked(Tcb* t, bool keep_place) {
+CHM_HOT void make_ready_locked(Tcb* t, bool keep_place) {
     if (t->suspend_count) {  // a suspended task's wait ended: stay suspended
         t->state = TaskState::Suspended;
         return;
@@ -43,7 +44,7 @@ void make_ready_locked(Tcb* t, bool keep_place) {
     }
 }
 
-void unready_locked(Tcb* t) {
+CHM_HOT void unready_locked(Tcb* t) {
     if (t->in_ready) {
         t->in_ready = false;
         sched_dequeue_locked(t);
@@ -140,7 +141,7 @@ namespace {
 // (nullptr = the kernel's idle loop). Returns in the original context when
 // it is scheduled again.
 // Never inlined: it must stay the one call site of the port switch.
-__attribute__((noinline)) void switch_to_locked(Tcb* next, std::uint64_t now) {
+CHM_HOT __attribute__((noinline)) void switch_to_locked(Tcb* next, std::uint64_t now) {
     Tcb* prev = g_k.current;
     port::Context* from = prev ? &prev->ctx : &g_k.idle_ctx;
     port::Context* to = next ? &next->ctx : &g_k.idle_ctx;
@@ -221,7 +222,7 @@ inline std::uint64_t schedule_now_locked() {
 
 void schedule_locked() { schedule_at_locked(schedule_now_locked()); }
 
-void schedule_at_locked(std::uint64_t now) {
+CHM_HOT void schedule_at_locked(std::uint64_t now) {
     CHM_ASSERT_LOCKED();
     // A priority changed without a switch (set, lent, handler) is published too.
     if (port::g_db_publishes) publish_running_locked();
@@ -327,7 +328,7 @@ extern "C" void chm_task_yield(void) { chm::port::call_indirect_return(task_yiel
 
 namespace chm::kernel {
 
-int block_current_locked() {
+CHM_HOT int block_current_locked() {
     CHM_ASSERT_LOCKED();
     Tcb* cur = g_k.current;
     if (g_k.in_irq) {
@@ -391,7 +392,7 @@ void preempted_from_trampoline() {
 
 // A tick, or doorbell vectors left behind a switch, that arrived while the
 // mask was held; runs with the mask held.
-void pending_tick_locked(std::uint32_t why) {
+CHM_HOT void pending_tick_locked(std::uint32_t why) {
     const std::uint64_t now = why & port::kPendingTick ? now_exact_locked() : now_locked();
     if (why & port::kPendingTick) {
         // It may be the port's own retry (a deferred preemption) that
@@ -408,7 +409,7 @@ void pending_tick_locked(std::uint32_t why) {
 }
 
 // The timer signal, on the alternate stack, mask held by the port.
-bool tick_from_signal(std::uint64_t now) {
+CHM_HOT bool tick_from_signal(std::uint64_t now) {
     ++g_k.ticks;
     g_k.now_cache = now;
     timer_fired_locked(now);

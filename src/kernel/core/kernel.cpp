@@ -10,6 +10,7 @@
 #include "task/holds.hpp"
 #include "kernel/mem/heap.hpp"
 #include "sync/remote_wait.hpp"
+#include "lib/hot.hpp"
 
 namespace chm::kernel {
 
@@ -38,7 +39,7 @@ void run_shutdown_hooks() {
 
 // The idle loop: runs in chm_kernel_run's context with the mask held,
 // dispatches whenever something is ready and otherwise sleeps.
-int idle_loop_locked() {
+CHM_HOT __attribute__((noinline)) int idle_loop_locked() {
     for (;;) {
         if (g_k.stopping) return g_k.stop_code;
         if (g_k.alive == 0) return 0;

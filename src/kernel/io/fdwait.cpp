@@ -9,6 +9,7 @@
 #include "chimera/io.h"
 #include "kernel.hpp"
 #include "err/err_internal.hpp"
+#include "lib/hot.hpp"
 
 namespace chm::kernel {
 
@@ -95,7 +96,7 @@ void io_busy_arm_locked(std::uint64_t now) {
     }
 }
 
-void io_idle_wait_locked() {
+CHM_HOT void io_idle_wait_locked() {
     // Idle: ppoll watches the descriptors itself; no polling timer.
     timer_cancel_locked(&g_k.io_tmr);
     const std::size_t n = gather_locked();

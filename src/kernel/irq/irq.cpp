@@ -8,6 +8,7 @@
 #include "chimera/irq.h"
 #include "kernel.hpp"
 #include "err/err_internal.hpp"
+#include "lib/hot.hpp"
 
 namespace chm::kernel {
 namespace {
@@ -55,7 +56,7 @@ void irq_dispatch_locked() {
 
 bool irq_fds_bound_locked() { return g_nfds > 0; }
 
-std::size_t irq_gather_fds_locked(pollfd* out, std::size_t room) {
+CHM_HOT std::size_t irq_gather_fds_locked(pollfd* out, std::size_t room) {
     std::size_t k = 0;
     for (int v = CHM_IRQ_LINE_FIRST; v < CHM_IRQ_VECTORS && k < room; ++v) {
         const Vector& x = g_vec[v];

@@ -6,6 +6,7 @@
 #include "kernel.hpp"
 #include "task/holds.hpp"
 #include "sync/remote_wait.hpp"
+#include "lib/hot.hpp"
 
 namespace chm::kernel {
 
@@ -89,7 +90,7 @@ std::uint32_t remote_waiter_urgency() {
     return cur ? order_number(cur->s, Side::kWaiter) : UINT32_MAX;
 }
 
-void publish_running_locked() {
+CHM_HOT void publish_running_locked() {
     const Tcb* t = g_k.current;
     if (!t) return port::doorbell_publish_locked(0, 0);
     port::doorbell_publish_locked(task_id(t), order_number(t->s, Side::kRunning));

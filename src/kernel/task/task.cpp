@@ -9,6 +9,7 @@
 #include "err/err_internal.hpp"
 #include "core/fiber_asan.hpp"
 #include "kernel.hpp"
+#include "lib/hot.hpp"
 
 namespace chm::kernel {
 
@@ -129,7 +130,7 @@ void task_start(void* p) {
     task_end_current(CHM_TASK_RETURNED, 0);
 }
 
-void release_cycle_locked(Tcb* t, std::uint64_t release) {
+CHM_HOT void release_cycle_locked(Tcb* t, std::uint64_t release) {
     task_apply_timing_locked(t);  // chm_task_set_timing takes effect here
     // Counted here, not when the task returns from its wait: a deadline
     // that passes before it runs again names the cycle that missed.

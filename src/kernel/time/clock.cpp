@@ -4,6 +4,7 @@
 #include <cerrno>
 
 #include "kernel.hpp"
+#include "lib/hot.hpp"
 
 namespace chm::kernel {
 
@@ -11,7 +12,7 @@ namespace {
 constexpr std::uint64_t kMinRepeatNs = 50000;  // shortest interval worth repeating
 }  // namespace
 
-void timer_add_locked(TimerNode* n, std::uint64_t due) {
+CHM_HOT void timer_add_locked(TimerNode* n, std::uint64_t due) {
     CHM_ASSERT_LOCKED();
     if (n->idx >= 0) g_k.timers.remove(n);
     n->due = due;
@@ -30,7 +31,7 @@ std::uint64_t next_due_locked() {
     return due;
 }
 
-bool timers_run_locked(std::uint64_t now) {
+CHM_HOT bool timers_run_locked(std::uint64_t now) {
     CHM_ASSERT_LOCKED();
     bool fired = false;
     while (TimerNode* n = g_k.timers.top()) {
@@ -86,7 +87,7 @@ std::uint64_t next_gap_guess_locked(std::uint64_t due) {
 
 }  // namespace
 
-void timer_program_locked(std::uint64_t now) {
+CHM_HOT void timer_program_locked(std::uint64_t now) {
     if (g_k.cfg.virtual_clock) return;
     const std::uint64_t due = next_due_locked();
     const bool repeating = port::timer_interval() != 0;
@@ -114,7 +115,7 @@ void timer_program_locked(std::uint64_t now) {
     }
 }
 
-void timer_fired_locked(std::uint64_t now) {
+CHM_HOT void timer_fired_locked(std::uint64_t now) {
     const std::uint64_t every = port::timer_interval();
     if (!every || !g_k.armed_at) {
         g_k.armed_at = 0;  // a one-shot fired (or a retry replaced it): nothing armed

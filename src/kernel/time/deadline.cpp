@@ -16,6 +16,7 @@
 #include "err/err_internal.hpp"
 #include "core/fiber_asan.hpp"
 #include "kernel.hpp"
+#include "lib/hot.hpp"
 
 namespace chm::kernel {
 
@@ -28,7 +29,7 @@ void deadline_missed_locked(Tcb* t, std::uint64_t now) {
     t->miss_pending = true;  // without a handler: a kernel error signal (err/)
 }
 
-void complete_cycle_locked(Tcb* t, std::uint64_t now) {
+CHM_HOT void complete_cycle_locked(Tcb* t, std::uint64_t now) {
     ++t->cycles_done;
     if (t->s.cycle_cpu_ns > t->worst_cycle_cpu) t->worst_cycle_cpu = t->s.cycle_cpu_ns;
     if (t->dl.idx >= 0) {

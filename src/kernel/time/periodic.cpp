@@ -5,6 +5,7 @@
 
 #include "kernel.hpp"
 #include "err/err_internal.hpp"
+#include "lib/hot.hpp"
 
 namespace chm::kernel {
 
@@ -12,7 +13,7 @@ namespace {
 
 // Block the current task until `until` (Paused) or its next release
 // (WaitPeriod); user signals interrupt the wait.
-int sleep_current_locked(TaskState state, std::uint64_t until, TimerKind kind) {
+CHM_HOT int sleep_current_locked(TaskState state, std::uint64_t until, TimerKind kind) {
     Tcb* cur = g_k.current;
     cur->state = state;
     cur->interruptible = true;
@@ -43,7 +44,7 @@ int chm_task_pause_until(uint64_t restart_ns) {
     return sleep_current_locked(TaskState::Paused, restart_ns, TimerKind::Wake);
 }
 
-int chm_task_wait_period(void) {
+CHM_HOT int chm_task_wait_period(void) {
     port::irq_disable();
     Tcb* cur = g_k.current;
     if (!cur || !cur->s.period_ns) {
@@ -73,7 +74,7 @@ int chm_task_wait_period(void) {
     return r;
 }
 
-uint64_t chm_task_cycle_release(void) {
+CHM_HOT uint64_t chm_task_cycle_release(void) {
     Tcb* cur = g_k.current;
     return cur && cur->s.period_ns ? cur->s.release_ns : 0;
 }

@@ -12,7 +12,8 @@
  *   x19 x20 x21 x22 x23 x24 x25 x26 x27 x28 x29 x30 d8 .. d15 fpcr pad
  * Resuming pops it and returns through the saved x30.
  */
-    .text
+    /* With the other functions every cycle runs (src/lib/hot.hpp). */
+    .section .text.hot.chm_port_switch,"ax",%progbits
     .globl  chm_port_switch
     .type   chm_port_switch, %function
     .p2align 4

@@ -19,7 +19,8 @@
  * under emulation the wrong register would come back. Register-direct moves
  * are exact everywhere and cost the same on a 68882.
  */
-    .text
+    /* With the other functions every cycle runs (src/lib/hot.hpp). */
+    .section .text.hot.chm_port_switch,"ax",@progbits
     .globl  chm_port_switch
     .type   chm_port_switch, @function
     .p2align 2

@@ -4,6 +4,7 @@
 // a ring reaches it by a directed signal.
 #include "port.hpp"
 #include "posix_internal.hpp"
+#include "lib/hot.hpp"
 
 #include <cerrno>
 #include <csignal>
@@ -33,7 +34,7 @@ void futex(std::uint32_t* w, int op, std::uint32_t val, bool shared) {
 
 }  // namespace
 
-void doorbell_bump_from_signal() { __atomic_fetch_add(g_db.seq, 1, __ATOMIC_SEQ_CST); }
+CHM_HOT void doorbell_bump_from_signal() { __atomic_fetch_add(g_db.seq, 1, __ATOMIC_SEQ_CST); }
 
 void doorbell_use(const Doorbell* db) {
     const std::uint32_t moved = __atomic_exchange_n(g_db.pending, 0, __ATOMIC_SEQ_CST);
@@ -50,7 +51,7 @@ void doorbell_use(const Doorbell* db) {
     if (moved) __atomic_fetch_or(g_db.pending, moved, __ATOMIC_SEQ_CST);
 }
 
-void doorbell_publish_locked(std::uint32_t running, std::uint32_t urgency) {
+CHM_HOT void doorbell_publish_locked(std::uint32_t running, std::uint32_t urgency) {
     if (!g_db_publishes) return;
     if (running != g_published_running || urgency != g_published_urgency) {
         const bool may_matter = running != g_published_running || urgency < g_published_urgency;
@@ -148,7 +149,7 @@ void idle_wait_locked(std::uint64_t poll_ns, const IdleWatch* watch) {
     store(g_db.state, kDbRunning);
 }
 
-int idle_wait_fds_locked(pollfd* fds, unsigned long nfds, std::uint64_t until_ns) {
+CHM_HOT int idle_wait_fds_locked(pollfd* fds, unsigned long nfds, std::uint64_t until_ns) {
     const std::uint32_t seen = load(g_db.seq);
     sigset_t block, during;
     sigemptyset(&block);

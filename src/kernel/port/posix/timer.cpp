@@ -3,6 +3,7 @@
 // alternate signal stack, so no signal frame ever lands on a task stack.
 #include "port.hpp"
 #include "posix_internal.hpp"
+#include "lib/hot.hpp"
 
 #include <cerrno>
 #include <csignal>
@@ -30,7 +31,7 @@ __attribute__((tls_model("initial-exec"))) thread_local bool t_kernel_thread = f
 std::uint32_t g_deferred = 0;
 unsigned g_defer_streak = 0;  // consecutive deferrals: backs the retry off
 
-void on_timer(int, siginfo_t*, void* ucontext) {
+CHM_HOT void on_timer(int, siginfo_t*, void* ucontext) {
     if (!t_kernel_thread) {  // a process-directed copy reached another thread
         __atomic_fetch_add(&g_stray, 1, __ATOMIC_RELAXED);
         return;
@@ -160,7 +161,7 @@ int timer_init(TickHandler handler) {
     return 0;
 }
 
-void timer_arm_locked(std::uint64_t at_ns, std::uint64_t interval_ns) {
+CHM_HOT void timer_arm_locked(std::uint64_t at_ns, std::uint64_t interval_ns) {
     if (!g_timer_live) return;
     itimerspec its{};
     if (at_ns != 0) {

@@ -40,7 +40,8 @@
     popq    %rbp
 .endm
 
-    .text
+    /* With the other functions every cycle runs (src/lib/hot.hpp). */
+    .section .text.hot.chm_port_switch,"ax",@progbits
     .globl  chm_port_switch
     .type   chm_port_switch, @function
     .p2align 4
