@@ -17,6 +17,7 @@
 #include "port.hpp"
 #include "sched/muf.hpp"
 #include "sched/readyq.hpp"
+#include "time/timer_heap.hpp"
 
 namespace chm::kernel {
 
@@ -34,15 +35,6 @@ namespace chm::kernel {
 #endif
 
 struct Tcb;
-
-// One pending timed event, intrusive in its owner; lives in the timer heap.
-enum class TimerKind : std::uint8_t { Wake, Release, Deadline, IoPoll };
-struct TimerNode {
-    std::uint64_t due = 0;
-    std::int32_t idx = -1;  // slot in the timer heap; -1 = not armed
-    TimerKind kind = TimerKind::Wake;
-    Tcb* owner = nullptr;
-};
 
 // Tasks blocked on one object, most urgent first (by the scheduler's
 // `before`, then arrival).
@@ -173,47 +165,15 @@ struct Tcb {
 
 inline constexpr std::uint32_t kMaxTasks = 32768;
 
+// Timers due at the same instant fire in task-index order (spawn order in
+// a fresh kernel): simultaneous releases arrive in a defined order, which
+// decides first come among equals (sched.h). Owner-less timers first.
 inline std::uint32_t timer_order(const TimerNode* n) { return n->owner ? n->owner->index + 1 : 0; }
 
 inline Tcb* tcb_of(chm_sched_task_t* s) {
     return reinterpret_cast<Tcb*>(reinterpret_cast<char*>(s) - offsetof(Tcb, s));
 }
 
-// A binary min-heap of pointers with each element's slot stored in the
-// element: O(log n) push, remove and update, O(1) top. Storage is grown only
-// by reserve(), outside the interrupt mask.
-template <class T, class Less, class Slot>
-class IndexedHeap {
-public:
-    bool reserve(std::size_t n);
-    void push(T* x);
-    void remove(T* x);
-    T* top() const { return size_ ? data_[0] : nullptr; }
-    std::size_t size() const { return size_; }
-    T* at(std::size_t i) const { return data_[i]; }
-    Less less;
-
-private:
-    void sift_up(std::size_t i);
-    void sift_down(std::size_t i);
-    void place(std::size_t i, T* x) { data_[i] = x; Slot::set(x, std::int32_t(i)); }
-    T** data_ = nullptr;
-    std::size_t size_ = 0, cap_ = 0;
-};
-
-// Timers due at the same instant fire in task-index order (spawn order in
-// a fresh kernel): simultaneous releases arrive in a defined order, which
-// decides first come among equals (sched.h). Owner-less timers first.
-struct TimerLess {
-    bool operator()(const TimerNode* a, const TimerNode* b) const {
-        if (a->due != b->due) return a->due < b->due;
-        return timer_order(a) < timer_order(b);
-    }
-};
-struct TimerSlot {
-    static void set(TimerNode* n, std::int32_t i) { n->idx = i; }
-};
-using TimerHeap = IndexedHeap<TimerNode, TimerLess, TimerSlot>;
 
 struct Kernel {
     bool initialised = false;
@@ -517,5 +477,4 @@ struct IrqGuard {
 
 }  // namespace chm::kernel
 
-#include "core/indexed_heap.inl"
 #include "sched/readyq.inl"

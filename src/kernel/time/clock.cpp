@@ -16,7 +16,7 @@ CHM_HOT void timer_add_locked(TimerNode* n, std::uint64_t due) {
     CHM_ASSERT_LOCKED();
     if (n->idx >= 0) g_k.timers.remove(n);
     n->due = due;
-    g_k.timers.push(n);
+    g_k.timers.push(n, timer_order(n));
 }
 
 void timer_cancel_locked(TimerNode* n) {
@@ -26,7 +26,7 @@ void timer_cancel_locked(TimerNode* n) {
 
 std::uint64_t next_due_locked() {
     std::uint64_t due = 0;
-    if (TimerNode* top = g_k.timers.top()) due = top->due;
+    if (g_k.timers.size()) due = g_k.timers.top_due();
     if (g_k.quantum_due && (!due || g_k.quantum_due < due)) due = g_k.quantum_due;
     return due;
 }
@@ -34,8 +34,8 @@ std::uint64_t next_due_locked() {
 CHM_HOT bool timers_run_locked(std::uint64_t now) {
     CHM_ASSERT_LOCKED();
     bool fired = false;
-    while (TimerNode* n = g_k.timers.top()) {
-        if (n->due > now) break;
+    while (g_k.timers.size() && g_k.timers.top_due() <= now) {
+        TimerNode* n = g_k.timers.top();
         g_k.timers.remove(n);
         fired = true;
         Tcb* t = n->owner;
