@@ -4,8 +4,8 @@
 //  * module_cycle_cpu: CPU time of one cycle of an empty module at 1 kHz
 //    (copy-in of one double, the call, copy-out of one double, the
 //    framework's checks) beside a bare periodic task's cycle at 1 kHz on
-//    the same RTPU (peer_task_cycle_cpu), each alone, in alternating
-//    blocks of 5 windows (module first, then bare, then bare first...):
+//    the same RTPU (peer_task_cycle_cpu), each alone, in 10 alternating
+//    blocks of 4 windows (module first, then bare, then bare first...):
 //    the kernel's per-task CPU accounting read every 50 ms; the figure is
 //    the median over all windows of each window's CPU per cycle. (Measured
 //    at once over a whole run, the two swung 1.35x to 8.3x between rounds:
@@ -13,7 +13,9 @@
 //    which of two tasks released together paid for re-arming the timer
 //    changed from run to run. Measured one after the other, a round's
 //    ratio still moved from 1.6 to 2.9 with the host's state between the
-//    two halves: interleaving gives both the same states.)
+//    two halves: interleaving gives both the same states. With 4 blocks of
+//    5 windows a round's ratio still ranged 1.3-2.6 over 12 rounds; with 10
+//    blocks of 4, 1.1-1.95 over 24.)
 //  * servo_switch_4_modules_periods: a switch of 4 modules on 2 RTPUs (two
 //    off, two on, each handing a variable over), from the call to the
 //    instant it takes effect, in periods of the slowest module (target <=
@@ -178,7 +180,7 @@ void servo_rows(Session& s) {
 
     // The cycle's CPU, beside a bare periodic task's.
     {
-        const int blocks = s.quick() ? 2 : 4, per_block = s.quick() ? 2 : 5;
+        const int blocks = s.quick() ? 2 : 10, per_block = s.quick() ? 2 : 4;
         chm_servo_module_t m = spawn(1, MODULE1_SO, "empty", kMs);
         Windows mod, peer;
         auto measure_module = [&] {

@@ -110,7 +110,7 @@ CHM_HOT void cycle_task(void* arg) {
         if (m->pending_mask.load(std::memory_order_relaxed)) apply_pending(m);
         m->release_now = r;
         (void)svar::set_copy_in(m->set);  // -EAGAIN: an input keeps its last value
-        const int rc = m->desc->cycle(m);
+        const int rc = m->cycle_fn(m);
         m->release_now = 0;
         if (rc != 0 || m->missed_error.load()) {
             if (rc) set_last_error(m, "cycle returned %d", rc);

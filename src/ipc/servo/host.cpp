@@ -266,6 +266,7 @@ int spawn(const SpawnReq& q, const ParamOverride* params, const char* path, Ref*
         port::preemptible_object_add(reinterpret_cast<const void*>(m->desc->cycle));  // its code runs in preemptible tasks
     }
     const chm_module_desc_t* d = m->desc;
+    m->cycle_fn = d->cycle;
     for (std::size_t i = 0; i < d->n_params; ++i) m->params[i] = d->params[i].def;
     int r = 0;
     for (std::uint32_t i = 0; i < q.n_params && r == 0; ++i) {

@@ -108,7 +108,7 @@ int serve(const char* req, std::uint32_t len, char* rep, std::uint32_t room, std
 // and each further line it touches is a miss.
 struct alignas(64) chm_module {
     // ---- per cycle
-    const chm_module_desc_t* desc = nullptr;
+    int (*cycle_fn)(chm_module_t*) = nullptr;  // desc->cycle: the descriptor is in another page
     chm_svar_set_t* set = nullptr;
     std::atomic<std::uint32_t> pending_mask{0};  // bit i: pending[i] waits for the next cycle
     // A module switched on: its cycle task and a resolve (aborted) race to
@@ -134,6 +134,7 @@ struct alignas(64) chm_module {
     std::uint64_t off_at() const { return off_armed.load(std::memory_order_acquire) ? off_time : 0; }
 
     // ---- the rest
+    const chm_module_desc_t* desc = nullptr;
     bool used = false;
     std::uint32_t gen = 0;
     int index = 0;

@@ -40,6 +40,7 @@ struct SetVar {
 
 struct chm_svar_set {
     std::uint32_t id;
+    std::uint32_t token;   // a->token, at creation: read at every cycle (holds), without a's line
     bp::Attachment* a;
     std::uint32_t gen;     // the attachment's, at creation
     Table table;
@@ -93,7 +94,7 @@ SetVar* outputs(chm_svar_set* s) { return s->vars + s->n_in; }
 
 // Does entry `e` name `s` as its writer?
 bool holds(const chm_svar_set* s, const Entry* e) {
-    return e->writer_token.load(Acq) == s->a->token && e->writer_id.load(Acq) == s->id;
+    return e->writer_token.load(Acq) == s->token && e->writer_id.load(Acq) == s->id;
 }
 
 // Drop the set's claims (those still naming it) under the table lock.
@@ -279,6 +280,7 @@ int create_impl(const char* owner, const char* const* inputs, size_t n_in, const
     if (r == -ENOENT) bp::set_error("chm_svar_set_create %s: no state variables are declared", owner);
     if (r == 0) {
         s->a = s->table.a;
+        s->token = s->a->token;
         s->gen = s->table.gen;
         r = resolve(s, inputs, outs);
     }

@@ -22,6 +22,12 @@
 //    because a statically linked program's stubs lie in its own text;
 //    where the compiler ignores that (m68k), the port carves the program's
 //    PLT entries out of the preemptible code (port/posix/plt_ranges.cpp);
+//  * on aarch64 each is compiled without out-of-line atomics (the second
+//    pragma): GCC otherwise calls helpers (__aarch64_cas4_acq, ...) that
+//    libgcc links into the program's own text (lost stdio lines in 1 to 3
+//    runs in 10 of CLibraryIsSafeUnderPreemption under qemu-aarch64);
+//    tests/kernel/mem/alloc_callees_check.py checks every direct branch
+//    out of chm_mem_text in each architecture's build;
 //  * the C library and the system calls it reaches are not preemptible.
 #pragma once
 

@@ -5,6 +5,9 @@
 // No PLT stubs: they would lie in the executable's preemptible code (see
 // mem_text.hpp). Calls into the C library go through the GOT instead.
 #pragma GCC optimize("no-plt")
+#if defined(__aarch64__)
+#pragma GCC target("no-outline-atomics")  // atomics inline, not calls into the program's text
+#endif
 
 #include "kernel/mem/tlsf.hpp"
 
