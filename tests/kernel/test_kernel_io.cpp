@@ -17,6 +17,7 @@
 #include "chimera/io.h"
 #include "gap_ticker.hpp"
 #include "kernel_fixture.hpp"
+#include "port.hpp"
 
 namespace chm::test {
 namespace {
@@ -134,6 +135,25 @@ TEST_F(BlockingIo, AnIdleRtpuWaitsOnTheDescriptorWithoutSpinning) {
     ASSERT_EQ(g_out.r, 4);
     EXPECT_GE(g_out.waited, 290 * kMs);
     EXPECT_LT(g_out.cpu_s, 0.15) << "the kernel thread spun while waiting on the pipe";
+}
+
+// While a task is parked on a descriptor the RTPU sleeps in ppoll, and a
+// tick wakes it there. That path forgot the repeating timer (armed_at = 0)
+// and re-armed it after every tick: a timer_settime per cycle of a 1 kHz
+// task (~1 arm per cycle here). The idle loop's own path keeps it armed
+// (about one arm per 1,000 periods, docs/architecture.md, "Time").
+TEST_F(BlockingIo, APeriodicTaskBesideAParkedReadDoesNotReArmTheTimerEveryCycle) {
+    start(CHM_SCHED_MUF, false);
+    spawn(GapTicker::body, nullptr, "ticker", 5, 1 * kMs, 0);
+    spawn(reader, nullptr, "reader", 1);
+    write_later(g_fd[1], "done", 300);
+    const std::uint64_t arms0 = chm::port::timer_arm_count();
+    ASSERT_EQ(chm_kernel_run(), 0);
+    const std::uint64_t arms = chm::port::timer_arm_count() - arms0;
+    ASSERT_EQ(g_out.r, 4);
+    EXPECT_GT(GapTicker::cycles, 50);
+    EXPECT_LT(arms * 4, std::uint64_t(GapTicker::cycles))
+        << arms << " timer arms for " << GapTicker::cycles << " cycles";
 }
 
 constexpr size_t kBig = 256 * 1024;  // four times a pipe's capacity

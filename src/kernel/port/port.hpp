@@ -197,6 +197,10 @@ void timer_arm_locked(std::uint64_t at_ns, std::uint64_t interval_ns = 0);
 // at every quantum's arming (kernel thread only).
 inline std::uint64_t g_timer_interval = 0;
 inline std::uint64_t timer_interval() { return g_timer_interval; }
+// How many times timer_arm_locked set the timer (a system call each):
+// tests check that a periodic set does not re-arm it at every cycle.
+inline std::uint64_t g_timer_arms = 0;
+inline std::uint64_t timer_arm_count() { return g_timer_arms; }
 
 // Tear the timer down (process exit, tests).
 void timer_fini();

@@ -173,6 +173,7 @@ CHM_HOT void timer_arm_locked(std::uint64_t at_ns, std::uint64_t interval_ns) {
         interval_ns = 0;
     }
     g_timer_interval = interval_ns;
+    ++g_timer_arms;
     timer_settime(g_timer, TIMER_ABSTIME, &its, nullptr);
 }
 
