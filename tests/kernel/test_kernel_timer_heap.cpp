@@ -25,7 +25,9 @@ struct Model {
 
 void run_sequence(std::uint64_t seed, int ops, std::size_t nodes, std::uint64_t due_range) {
     std::mt19937_64 rng(seed);
-    TimerHeap heap;
+    struct OwnHeap : TimerHeap {
+        ~OwnHeap() { free_storage(); }
+    } heap;
     ASSERT_TRUE(heap.reserve(nodes));
     std::vector<TimerNode> node(nodes);
     std::vector<std::uint32_t> order(nodes);
@@ -104,7 +106,9 @@ TEST(TimerHeap, AgreesWithASortedSetOverRandomSequences) {
 }
 
 TEST(TimerHeap, RemovingANodeFromTheMiddleKeepsTheOrder) {
-    TimerHeap heap;
+    struct OwnHeap : TimerHeap {
+        ~OwnHeap() { free_storage(); }
+    } heap;
     ASSERT_TRUE(heap.reserve(64));
     std::vector<TimerNode> node(40);
     for (std::size_t i = 0; i < node.size(); ++i) {

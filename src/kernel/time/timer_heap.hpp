@@ -63,6 +63,14 @@ public:
         if (i > 0 && before(last, data_[(i - 1) / kArity])) sift_up(i, last);
         else sift_down(i, last);
     }
+    // Free the storage (empty the heap first). A plain handle otherwise,
+    // copied as one: the kernel keeps its heap's storage from one init to
+    // the next (core/kernel.cpp, chm_kernel_fini).
+    void free_storage() {
+        std::free(data_);
+        data_ = nullptr;
+        size_ = cap_ = 0;
+    }
     TimerNode* top() const { return size_ ? data_[0].node : nullptr; }
     std::uint64_t top_due() const { return data_[0].due; }  // size() > 0
     std::size_t size() const { return size_; }
