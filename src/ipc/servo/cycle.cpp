@@ -120,7 +120,9 @@ CHM_HOT void cycle_task(void* arg) {
             run_entry(m, kEntryError, rc ? rc : ETIME);
             return;
         }
-        (void)svar::set_copy_out(m->set);
+        // The public call on failure only: it reports the error as before
+        // (a set without its claim raises, which sends the module to ERROR).
+        if (svar::set_copy_out(m->set) != 0) (void)chm_svar_set_write(m->set);
         ++m->cycles;
         chm_task_wait_period();
     }
