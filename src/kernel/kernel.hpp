@@ -174,7 +174,6 @@ inline Tcb* tcb_of(chm_sched_task_t* s) {
     return reinterpret_cast<Tcb*>(reinterpret_cast<char*>(s) - offsetof(Tcb, s));
 }
 
-
 struct Kernel {
     bool initialised = false;
     bool running = false;
@@ -286,6 +285,11 @@ inline bool timer_serves_locked(std::uint64_t due, std::uint64_t now) {
 // The timer signal came: what is armed now (a repeating timer re-armed
 // itself; a one-shot is spent).
 void timer_fired_locked(std::uint64_t now);
+// A tick that came while the RTPU slept (kept pending, taken after the
+// wait): what is armed now, the due timers, the next arming. The one path
+// for both of the RTPU's sleeps (the idle loop's, and ppoll's while tasks
+// are parked on descriptors), so neither forgets a repeating timer.
+void idle_tick_locked();
 std::uint64_t next_due_locked();
 
 // ---- deadline failures (time/deadline.cpp)

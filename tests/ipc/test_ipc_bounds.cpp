@@ -8,9 +8,10 @@
 // is bounded, and killed and reaped by the fixture even when a test fails.
 #include <cstdlib>
 #include <set>
+#include <string>
+
 #include <dirent.h>
 #include <pthread.h>
-#include <string>
 
 #include "chimera/irq.h"
 #include "chimera/msgq.h"
@@ -35,6 +36,18 @@ constexpr std::uint64_t kAtOnceNs = 2'000'000'000ull;
 constexpr std::uint64_t kLeaveNs = 20'000'000'000ull;
 
 std::string last_error() { return chm_bp_last_error(); }
+
+// In a child that forked `c`: wait for it at most 20 s, kill it if it
+// hung (never left behind). Its wait status, or -1 when it hung.
+int reap_or_kill(pid_t c) {
+    int st = 0;
+    pid_t r = 0;
+    for (int ms = 0; ms < 20000 && (r = waitpid(c, &st, WNOHANG)) == 0; ++ms) sleep_us(1000);
+    if (r == c) return st;
+    kill(c, SIGKILL);
+    waitpid(c, nullptr, 0);
+    return -1;
+}
 
 // A child attaches, opens the semaphore and stops inside chm_rsem_v
 // holding its lock: chm_rsem_try_p gives -EAGAIN naming the holder, a
@@ -253,11 +266,7 @@ void IpcBounds::ends_while_the_monitor_waits(Ending how) {
         case Ending::kFork: {
             const pid_t c = fork();
             if (c == 0) _exit(0);
-            int status = 0;
-            pid_t r = 0;
-            for (int ms = 0; c > 0 && ms < 20000 && (r = waitpid(c, &status, WNOHANG)) == 0; ++ms) sleep_us(1000);
-            if (c > 0 && r != c) kill(c, SIGKILL), waitpid(c, nullptr, 0);  // never left behind
-            said.put(c > 0 && r == c ? 'F' : 'x');
+            said.put(c > 0 && reap_or_kill(c) != -1 ? 'F' : 'x');
             return 0;  // not left: a death, recovered by the survivors
         }
         }
@@ -342,14 +351,7 @@ TEST_F(IpcBounds, AForkOfAnAttachedProcessCopiesOnlyTheForkingThread) {
             const pid_t c = fork();
             if (c == 0) _exit(7);
             if (c < 0) return 3;
-            int st = 0;
-            pid_t r = 0;
-            for (int ms = 0; ms < 20000 && (r = waitpid(c, &st, WNOHANG)) == 0; ++ms) sleep_us(1000);
-            if (r != c) {
-                kill(c, SIGKILL);  // hung: never left behind
-                waitpid(c, nullptr, 0);
-                return 4;
-            }
+            if (reap_or_kill(c) == -1) return 4;
             if (g_threads_at_fork != before) return 10;
         }
         return chm_bp_leave() == 0 ? 0 : 5;

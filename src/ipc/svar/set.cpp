@@ -40,7 +40,7 @@ struct SetVar {
 
 struct chm_svar_set {
     std::uint32_t id;
-    std::uint32_t token;   // a->token, at creation: read at every cycle (holds), without a's line
+    std::uint32_t token;   // a->token, at creation: what its claims name; read at every cycle (holds) without a's line
     bp::Attachment* a;
     std::uint32_t gen;     // the attachment's, at creation
     Table table;
@@ -235,7 +235,7 @@ int claim_outputs(chm_svar_set* s, const char* const* displace, size_t n_displac
         e->switch_cell.store(sw.none() ? 0 : sw.cell + 1, Rel);
         e->switch_seq.store(sw.seq, Rel);
         e->writer_id.store(s->id, Rel);
-        e->writer_token.store(s->a->token, Rel);
+        e->writer_token.store(s->token, Rel);
     }
     bp::lock_clear_dirty(&s->table.hdr()->lock);
     s->claims_held.store(true);
@@ -372,7 +372,7 @@ int set_reclaim_after_abort(chm_svar_set* s, DecisionRef r) {
         e->switch_cell.store(0, Rel);
         e->switch_seq.store(0, Rel);
         e->writer_id.store(s->id, Rel);
-        e->writer_token.store(s->a->token, Rel);
+        e->writer_token.store(s->token, Rel);
     }
     bp::lock_clear_dirty(&s->table.hdr()->lock);
     s->claims_held.store(true);

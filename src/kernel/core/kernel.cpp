@@ -75,12 +75,7 @@ CHM_HOT __attribute__((noinline)) int idle_loop_locked() {
             port::idle_wait_locked(poll_ns);
         }
         // A ring marked pending is dispatched at the top of the loop.
-        if (port::irq_take_pending_bits() & port::kPendingTick) {
-            const std::uint64_t t = now_exact_locked();
-            timer_fired_locked(t);
-            timers_run_locked(t);
-            timer_program_locked(t);
-        }
+        if (port::irq_take_pending_bits() & port::kPendingTick) idle_tick_locked();
     }
 }
 

@@ -115,16 +115,10 @@ CHM_HOT void io_idle_wait_locked() {
         timer_program_locked(now_locked());
     }
     if (port::idle_wait_fds_locked(g_polled, n, 0) > 0) scatter_locked();
-    if (!g_k.cfg.virtual_clock && (port::irq_take_pending_bits() & port::kPendingTick)) {
-        // As the idle loop does (core/kernel.cpp): a repeating timer stays
-        // armed. Forgetting it here (armed_at = 0, as this did) re-armed
-        // the timer after every tick an RTPU slept through in ppoll, a
-        // timer_settime per cycle of a 1 kHz task on every chimera-rtpu.
-        const std::uint64_t t = now_exact_locked();
-        timer_fired_locked(t);
-        timers_run_locked(t);
-        timer_program_locked(t);
-    }
+    // The idle loop's own path (time/clock.cpp): this one used to forget a
+    // repeating timer (armed_at = 0) and re-arm it after every tick, a
+    // timer_settime per cycle of a 1 kHz task on every chimera-rtpu.
+    if (!g_k.cfg.virtual_clock && (port::irq_take_pending_bits() & port::kPendingTick)) idle_tick_locked();
 }
 
 }  // namespace chm::kernel

@@ -115,6 +115,13 @@ CHM_HOT void timer_program_locked(std::uint64_t now) {
     }
 }
 
+CHM_HOT void idle_tick_locked() {
+    const std::uint64_t t = now_exact_locked();
+    timer_fired_locked(t);
+    timers_run_locked(t);
+    timer_program_locked(t);
+}
+
 CHM_HOT void timer_fired_locked(std::uint64_t now) {
     const std::uint64_t every = port::timer_interval();
     if (!every || !g_k.armed_at) {
