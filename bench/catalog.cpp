@@ -101,8 +101,15 @@ constexpr RowInfo kRows[] = {
     // each running the Chimera kernel, on two cores: a sender task on RTPU 1
     // and a receiver task on RTPU 2, streaming, against Boost message_queue
     // between two processes pinned the same way.
-    {"msgq_stream_24b_xrtpu", "ns", "peer_bipc_mq_stream_24b_xcore", kNull, ratio_le(1.5),
+    // Throughput >= 1 x the peer's: ns per message at most the peer's.
+    {"msgq_stream_24b_xrtpu", "ns", "peer_bipc_mq_stream_24b_xcore", kNull, ratio_le(1),
      "cross-RTPU 24-byte messages streamed from a task on RTPU 1 to a task on RTPU 2, per message"},
+    {"msgq_stream_64k_xrtpu", "ns", "peer_bipc_mq_stream_64k_xcore", kNull, none,
+     "cross-RTPU 64 KiB messages streamed from a task on RTPU 1 to a task on RTPU 2, per message"},
+    // One-way with the receiver polling, judged against the cache-line floor
+    // between the same two tasks measured run by run in turn with it.
+    {"msgq_oneway_polling_xrtpu", "ns", "peer_cacheline_pingpong_msgq_rtpus", kNull, ratio_le(3),
+     "cross-RTPU 24-byte message to a task whose RTPU polls, one-way (RT/2)"},
     // Put+get with the queue in RTPU 2's window, both by this one process
     // (no second RTPU runs): not a cross-RTPU figure, so no target.
     {"msgq_putget_24b_remote_one_process", "ns", "peer_bipc_mq_24b_one_thread", 160 * us, none,
@@ -239,6 +246,8 @@ constexpr RowInfo kRows[] = {
     // tasks: the floor under the vCPU placement of that moment.
     {"peer_cacheline_pingpong_rtpus", "ns", nullptr, kNull, none,
      "the two tasks of rsem_handoff_polling pass a cache line, spinning; one hand-off (its floor)"},
+    {"peer_cacheline_pingpong_msgq_rtpus", "ns", nullptr, kNull, none,
+     "the two tasks of msgq_oneway_polling_xrtpu pass a cache line, spinning; one hand-off (its floor)"},
     // ---- peers: messages
     {"peer_posix_mq_24b_rt2_same_core", "ns", nullptr, kNull, none,
      "POSIX mq 24-byte round trip between two processes on one core; RT/2"},
@@ -255,6 +264,9 @@ constexpr RowInfo kRows[] = {
     {"peer_bipc_mq_stream_24b_xcore", "ns", nullptr, kNull, none,
      "Boost.Interprocess message_queue: 24-byte messages streamed from one process to another "
      "on the other core, per message"},
+    {"peer_bipc_mq_stream_64k_xcore", "ns", nullptr, kNull, none,
+     "Boost.Interprocess message_queue: 64 KiB messages streamed from one process to another "
+     "on the other core, per message (8 slots)"},
     {"peer_bipc_mq_64k_one_thread", "ns", nullptr, kNull, none,
      "Boost.Interprocess message_queue 64 KiB send + receive in one thread"},
     {"peer_bipc_mq_send_24b", "ns", nullptr, kNull, none,

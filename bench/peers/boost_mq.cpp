@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <cstring>
 #include <memory>
+#include <vector>
 
 #include "../harness.hpp"
 #include "../proc.hpp"
@@ -23,10 +24,10 @@ constexpr std::size_t kCapacity = 4096;
 
 // The name is removed as soon as the queue is mapped: a child forked later
 // shares the mapping, and nothing is left in /dev/shm on any exit path.
-std::unique_ptr<bip::message_queue> make_queue(const char* what, std::size_t capacity) {
+std::unique_ptr<bip::message_queue> make_queue(const char* what, std::size_t capacity, std::size_t msg = kMsg) {
     const std::string name = ipc_name(what).substr(1);  // Boost adds the '/'
     bip::message_queue::remove(name.c_str());
-    auto q = std::make_unique<bip::message_queue>(bip::create_only, name.c_str(), capacity, kMsg);
+    auto q = std::make_unique<bip::message_queue>(bip::create_only, name.c_str(), capacity, msg);
     bip::message_queue::remove(name.c_str());
     return q;
 }
@@ -109,44 +110,51 @@ void bipc_mq_rt2(Session& s) {
 }
 CHM_BENCH_MEASUREMENT(bipc_mq_rt2, "peer_bipc_mq_24b_rt2_same_core", "peer_bipc_mq_24b_rt2_xcore");
 
-// Streaming between two processes on two cores, as msgq_stream_24b_xrtpu:
-// 64 slots, blocking send and receive, a run's last message answered on a
+// Streaming between two processes on two cores, as msgq_stream_24b_xrtpu
+// and msgq_stream_64k_xrtpu: `slots` slots of `msg` bytes, blocking send
+// and receive, every message `msg` bytes, a run's last one answered on a
 // second queue; ns per message.
-void bipc_mq_stream(Session& s) {
+void bipc_stream(Session& s, const char* row, std::size_t msg, std::size_t slots) {
     s.need_cpus(2);
     Session::pin(s.cpu(0));
-    auto data = make_queue("data", 64);
+    auto data = make_queue("data", slots, msg);
     auto ack = make_queue("ack", 4);
     Child child(s.cpu(1), [&] {
-        char buf[kMsg];
+        std::vector<char> buf(msg);
         std::size_t got;
         unsigned prio;
         for (;;) {
-            data->receive(buf, sizeof buf, got, prio);
-            if (buf[0] == 1) ack->send(buf, kMsg, 0);
+            data->receive(buf.data(), buf.size(), got, prio);
+            if (buf[0] == 1) ack->send(buf.data(), kMsg, 0);
         }
         return 0;
     });
-    s.time_ops("peer_bipc_mq_stream_24b_xcore",
+    s.time_ops(row,
                "cross core: sender (this process) pinned " + s.cpu_name(0) + ", receiver (a forked "
-               "process) pinned " + s.cpu_name(1) + ", SCHED_OTHER; 64 slots, blocking send / "
-               "receive; per message, a run's last message answered on a second queue",
+               "process) pinned " + s.cpu_name(1) + ", SCHED_OTHER; " + std::to_string(slots) + " slots of " +
+                   std::to_string(msg) + " bytes, blocking send / receive of " + std::to_string(msg) +
+                   "-byte messages; per message, a run's last message answered on a second queue",
                [&](std::uint64_t n) {
                    const auto deadline = boost::posix_time::microsec_clock::universal_time() +
                                          boost::posix_time::seconds(20);
-                   char buf[kMsg];
-                   std::memset(buf, 0, sizeof buf);
+                   std::vector<char> buf(msg, 0);
+                   char reply[kMsg];
                    std::size_t got;
                    unsigned prio;
                    for (std::uint64_t i = 0; i < n; ++i) {
                        buf[0] = i + 1 == n ? 1 : 0;
-                       data->send(buf, kMsg, 0);
+                       data->send(buf.data(), msg, 0);
                    }
-                   if (!ack->timed_receive(buf, sizeof buf, got, prio, deadline))
+                   if (!ack->timed_receive(reply, sizeof reply, got, prio, deadline))
                        throw std::runtime_error("message_queue: no answer from the peer process");
                });
 }
+
+void bipc_mq_stream(Session& s) { bipc_stream(s, "peer_bipc_mq_stream_24b_xcore", kMsg, 64); }
 CHM_BENCH_MEASUREMENT(bipc_mq_stream, "peer_bipc_mq_stream_24b_xcore");
+
+void bipc_mq_stream_64k(Session& s) { bipc_stream(s, "peer_bipc_mq_stream_64k_xcore", 64 * 1024, 8); }
+CHM_BENCH_MEASUREMENT(bipc_mq_stream_64k, "peer_bipc_mq_stream_64k_xcore");
 
 }  // namespace
 }  // namespace chm::bench
