@@ -81,6 +81,13 @@ constexpr RowInfo kRows[] = {
      "yield to an equal-priority task through the scheduler"},
     {"sem_v_wake_switch", "ns", "peer_fiber_switch", kNull, ratio_le(5),
      "V waking a higher-priority task, including the switch"},
+    // The same figures beside their in-run floor under the default
+    // cpu_accounting 1: a fiber switch that charges CPU time (one cycle
+    // counter read per switch). Shown beside the targets above, which stay.
+    {"yield_switch_vs_clocked_fiber", "ns", "peer_fiber_switch_clocked", kNull, ratio_le(3),
+     "yield_switch beside a fiber switch that charges CPU time at every switch"},
+    {"sem_v_wake_switch_vs_clocked_fiber", "ns", "peer_fiber_switch_clocked", kNull, ratio_le(5),
+     "sem_v_wake_switch beside a fiber switch that charges CPU time at every switch"},
     {"local_pv_noblock", "ns", "peer_sem_wait_post", 14 * us, ratio_le(1),
      "uncontended local P+V (paper: 7 + 7)"},
     // Like for like: the task is spawned, runs and ends, as the peer's thread
@@ -91,6 +98,8 @@ constexpr RowInfo kRows[] = {
     // run + destroy (the second half is the 100x over pthread above).
     {"task_spawn_run_exit_vs_fiber", "ns", "peer_fiber_create_destroy", kNull, ratio_le(2),
      "task_spawn_run_exit beside a Boost.Context fiber created, run to its end and destroyed"},
+    {"task_spawn_run_exit_vs_clocked_fiber", "ns", "peer_fiber_create_destroy_clocked", kNull, ratio_le(2),
+     "task_spawn_run_exit beside a fiber created, run and destroyed that charges CPU time at its two switches"},
     {"task_spawn_destroy_never_runs", "ns", "peer_pthread_create_join", kNull, none,
      "spawn + destroy a task that never runs (cheaper than the peer's work: no target)"},
     {"sched_ops_10k_over_10", "x", nullptr, kNull, {Target::kValueAtMost, 2},
@@ -204,6 +213,10 @@ constexpr RowInfo kRows[] = {
     {"peer_ucontext_switch", "ns", nullptr, kNull, none, "swapcontext; one switch"},
     {"peer_fiber_create_destroy", "ns", nullptr, kNull, none,
      "Boost.Context fiber created, run to its end, destroyed (pooled 64 KiB stacks)"},
+    {"peer_fiber_switch_clocked", "ns", nullptr, kNull, none,
+     "Boost.Context fiber resume charging CPU time (a cycle counter read and an add at every switch); one switch"},
+    {"peer_fiber_create_destroy_clocked", "ns", nullptr, kNull, none,
+     "Boost.Context fiber create + run + destroy, charging CPU time at its two switches"},
     // ---- peers: threads and their synchronisation
     {"peer_pthread_create_join", "ns", nullptr, kNull, none,
      "pthread_create of an empty thread + pthread_join"},

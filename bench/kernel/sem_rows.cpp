@@ -123,12 +123,16 @@ void wake_switch_rows(Session& s) {
                kb::fmt_ns(fixed.v_wake_switch.median) + "; FIXED, no quantum, cpu_accounting 0 (charged at ticks "
                "only): " + kb::fmt_ns(f.v_wake_switch.median),
            dflt.v_wake_switch.median, dflt.v_wake_switch.min, dflt.v_wake_switch.max);
+    s.emit("sem_v_wake_switch_vs_clocked_fiber",
+           "sem_v_wake_switch's figure (default config) beside a fiber switch that charges CPU time, as "
+           "cpu_accounting 1 (the default) must at the least",
+           dflt.v_wake_switch.median, dflt.v_wake_switch.min, dflt.v_wake_switch.max);
     s.emit("local_p_block",
            where(s) + "; binary semaphore: P by a priority-10 task that blocks, until the "
                       "priority-1 task runs (it returns from its own V)" + clock,
            dflt.p_block.median, dflt.p_block.min, dflt.p_block.max);
 }
-CHM_BENCH_MEASUREMENT(wake_switch_rows, "sem_v_wake_switch", "local_p_block");
+CHM_BENCH_MEASUREMENT(wake_switch_rows, "sem_v_wake_switch", "sem_v_wake_switch_vs_clocked_fiber", "local_p_block");
 
 // ---- V that wakes a blocked task of lower priority (no switch). H (10)
 // times V(S) that wakes L (5), then blocks on B; L takes S and blocks on S
