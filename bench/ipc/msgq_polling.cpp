@@ -32,17 +32,8 @@ namespace {
 constexpr std::size_t kMsg = 24;
 constexpr std::uint64_t kPollNs = 100'000;  // as rsem_handoff_polling
 
-// In common memory: the line that moves for the floor and, on a line of
-// its own, what the partner does with the next message.
-struct Floor {
-    PingLine line;
-    alignas(64) std::atomic<std::uint32_t> pass_line{0};  // 1: answer the line until kPingStop
-};
-
-Floor* floor_in(void* segment) {
-    const auto p = reinterpret_cast<std::uintptr_t>(segment);
-    return reinterpret_cast<Floor*>((p + 63) & ~std::uintptr_t(63));
-}
+using Floor = TaskLineFloor;  // ../peers/cacheline.hpp
+Floor* floor_in(void* segment) { return task_line_floor_in(segment); }
 
 void check_q(int r, const char* what) {
     if (r < 0) ipcb::fail_bp(what, r);

@@ -189,18 +189,8 @@ CHM_BENCH_MEASUREMENT(rsem_wake_local_row, "remote_semv_wake_local");
 // and forth. RT/2 = a V on one RTPU until the task it wakes on the other
 // runs.
 
-// The cache-line floor between the same two tasks (../peers/cacheline.hpp),
-// in common memory: the line that moves, and (on a line of its own) what
-// the partner does when a V wakes it.
-struct Floor {
-    PingLine line;
-    alignas(64) std::atomic<std::uint32_t> pass_line{0};  // 1: answer the line until kPingStop
-};
-
-Floor* floor_in(void* segment) {
-    const auto p = reinterpret_cast<std::uintptr_t>(segment);
-    return reinterpret_cast<Floor*>((p + 63) & ~std::uintptr_t(63));
-}
+using Floor = TaskLineFloor;  // ../peers/cacheline.hpp
+Floor* floor_in(void* segment) { return task_line_floor_in(segment); }
 
 // `n` hand-offs of the line and back (the bench's side); the partner's
 // task is woken into answer_pings and back out by the two semaphores.

@@ -25,6 +25,20 @@ inline void cpu_relax() {
 struct alignas(64) PingLine {
     std::atomic<std::uint64_t> seq{0};
 };
+// The floor between two tasks of two RTPUs (rsem_handoff_polling,
+// msgq_oneway_polling_xrtpu), placed in common memory: the line that
+// moves, and on a line of its own whether the partner, when the next
+// hand-off wakes it, answers the line until kPingStop.
+struct TaskLineFloor {
+    PingLine line;
+    alignas(64) std::atomic<std::uint32_t> pass_line{0};
+};
+// The floor in a segment allocated with 64 bytes to spare.
+inline TaskLineFloor* task_line_floor_in(void* segment) {
+    const auto p = reinterpret_cast<std::uintptr_t>(segment);
+    return reinterpret_cast<TaskLineFloor*>((p + 63) & ~std::uintptr_t(63));
+}
+
 // An even value no run reaches: the answering side returns.
 inline constexpr std::uint64_t kPingStop = UINT64_MAX - 1;
 
