@@ -28,6 +28,20 @@ enum class Ending { kLeave, kExit, kFork };
 class IpcBounds : public RsemTest {
 protected:
     void ends_while_the_monitor_waits(Ending how);
+    // A child that attaches, opens semaphore `name` and stops inside
+    // chm_rsem_v holding its lock ("rsem.v.locked"); let go (SIGCONT), its
+    // V lands and it leaves: exit status 0.
+    pid_t stall_in_v(const char* name) {
+        return spawn([this, name] {
+            if (chm_bp_attach_host(path_.c_str(), "holder", nullptr) != 0) return 1;
+            chm_rsem_t* mine = open_sem(name);
+            if (!mine) return 2;
+            stop_at("rsem.v.locked");
+            const int r = chm_rsem_v(mine);
+            (void)chm_bp_leave();
+            return r == 0 ? 0 : 3;
+        });
+    }
 };
 
 // Far above every bound below (20 µs, 10 ms; 5 s for a leave), far below
@@ -58,15 +72,7 @@ TEST_F(IpcBounds, PAndVReturnWithinTheirBoundsWhileAStalledPeerHoldsTheSemaphore
     ASSERT_EQ(chm_bp_attach_host(path_.c_str(), "test", nullptr), 0) << chm_bp_last_error();
     chm_rsem_t* s = make("s", CHM_SEM_COUNTING, 1);
     ASSERT_NE(s, nullptr);
-    const pid_t holder = spawn([&] {
-        if (chm_bp_attach_host(path_.c_str(), "holder", nullptr) != 0) return 1;
-        chm_rsem_t* mine = open_sem("s");
-        if (!mine) return 2;
-        stop_at("rsem.v.locked");
-        const int r = chm_rsem_v(mine);
-        (void)chm_bp_leave();
-        return r == 0 ? 0 : 3;
-    });
+    const pid_t holder = stall_in_v("s");
     ASSERT_TRUE(wait_stopped(holder));
 
     std::uint64_t t0 = now_ns();
@@ -183,15 +189,7 @@ TEST_F(IpcBounds, AnInterruptHandlersVDoesNotSpinOnAStalledPeersLock) {
     ASSERT_EQ(chm_bp_attach_host(path_.c_str(), "test", nullptr), 0) << chm_bp_last_error();
     chm_rsem_t* s = make("s", CHM_SEM_COUNTING, 0);
     ASSERT_NE(s, nullptr);
-    const pid_t holder = spawn([&] {
-        if (chm_bp_attach_host(path_.c_str(), "holder", nullptr) != 0) return 1;
-        chm_rsem_t* mine = open_sem("s");
-        if (!mine) return 2;
-        stop_at("rsem.v.locked");
-        const int r = chm_rsem_v(mine);
-        (void)chm_bp_leave();
-        return r == 0 ? 0 : 3;
-    });
+    const pid_t holder = stall_in_v("s");
     ASSERT_TRUE(wait_stopped(holder));
     Pipe said;
     const pid_t rtpu = spawn([&] {
