@@ -163,6 +163,54 @@ TEST_F(Servo, ADeadRtpusModulesAreSeenDeadAndCanMove) {
     EXPECT_GE(status(moved).cycles, 5u);
 }
 
+// A controller that dies holding RTPUs (a host process killed mid-run,
+// its module running on) no longer counts: another process takes those
+// RTPUs and goes on with the module it finds by name; while the first
+// controller lives, its control is refused to the other, and
+// chm_err_last() says who holds it.
+TEST_F(Servo, ADeadControllersRtpusCanBeTakenAndItsModulesRunOn) {
+    make_log("c");
+    ASSERT_EQ(chm_servo_release(1u << 1 | 1u << 2), 0) << chm_servo_last_error();
+    ASSERT_EQ(chm_bp_leave(), 0) << chm_bp_last_error();  // the child is the first controller
+    int up[2], go[2];
+    ASSERT_EQ(pipe(up), 0);
+    ASSERT_EQ(pipe(go), 0);
+    std::fflush(nullptr);
+    const pid_t child = fork();
+    if (child == 0) {
+        alarm(60);
+        char c = 'x';
+        chm_servo_module_t m;
+        if (chm_bp_attach_host(bp_.c_str(), "first", nullptr) != 0 || chm_servo_take(1u << 1) != 0 ||
+            spawn(1, COUNTER_SO, "c", 2 * kMs, &m) != 0 || on_until_done(m) != 0)
+            c = 'f';
+        (void)!write(up[1], &c, 1);
+        (void)!read(go[0], &c, 1);  // never answered: killed here
+        _exit(0);
+    }
+    ASSERT_GT(child, 0);
+    char c = 0;
+    ASSERT_EQ(read(up[0], &c, 1), 1);
+    ASSERT_EQ(c, 'x') << "the first controller could not take RTPU 1 and switch its module on";
+    ASSERT_EQ(chm_bp_attach_host(bp_.c_str(), "second", nullptr), 0) << chm_bp_last_error();
+    EXPECT_EQ(chm_servo_take(1u << 1), -EBUSY) << "a live controller's RTPU was taken from it";
+    // chm_err_last, like chm_servo_last_error, names the holder (servo.h).
+    EXPECT_NE(std::string(chm_err_last()).find("controlled by slot"), std::string::npos) << chm_err_last();
+    kill(child, SIGKILL);
+    int st = 0;
+    ASSERT_EQ(waitpid(child, &st, 0), child);
+    for (int fd : {up[0], up[1], go[0], go[1]}) close(fd);
+    EXPECT_EQ(chm_servo_take(1u << 1), 0) << "control held by a dead process: " << chm_servo_last_error();
+    chm_servo_module_t m;
+    ASSERT_EQ(chm_servo_find(1, "c", &m), 0) << chm_servo_last_error();
+    const std::uint64_t c0 = status(m).cycles;
+    EXPECT_EQ(status(m).state, CHM_SERVO_ON);
+    nap_ms(50);
+    EXPECT_GT(status(m).cycles, c0) << "the dead controller's module stopped";
+    EXPECT_EQ(off_until_done(m), 0) << chm_servo_last_error();
+    EXPECT_EQ(chm_servo_kill(m), 0) << chm_servo_last_error();
+}
+
 // Switch exactness: "v" handed between c1 (RTPU 1) and c2 (RTPU 2), same
 // period, many times. Every cycle index from the first on to the last off
 // was run by exactly one of them.

@@ -29,11 +29,12 @@ void Driver::chaos_phase() {
                 pv += led_->w[i].p_ok;
             }
             std::printf("soak: %3llu s: kills %llu, stops %llu, terms %llu, restarts %llu; sent %llu, "
-                        "received %llu, P/V %llu; worst stall %.1f ms\n",
+                        "received %llu, P/V %llu; worst stall %.1f ms; servo controller kills %llu, stops %llu\n",
                         (unsigned long long)((now_ns() - t0_) / 1000000000u), (unsigned long long)n_.kills,
                         (unsigned long long)n_.stops, (unsigned long long)n_.terms,
                         (unsigned long long)n_.restarts, (unsigned long long)sent, (unsigned long long)recv,
-                        (unsigned long long)pv, worst_.ns / 1e6);
+                        (unsigned long long)pv, worst_.ns / 1e6, (unsigned long long)n_.sv_kills,
+                        (unsigned long long)n_.sv_stops);
             std::fflush(stdout);
         }
         nap_witness(10);
@@ -143,7 +144,7 @@ void Driver::tick(bool chaos) {
         }
     }
     watch_stalls();
-    watch_servo();
+    watch_servo(chaos);
     if (chaos) watch_objects();
     if (chaos && now >= next_action_) {
         act();

@@ -40,7 +40,7 @@ void Driver::abandon() {
         int st = 0;
         if (p.pid > 0 && kill(p.pid, SIGKILL) == 0) reap(p, 5000, &st);
     }
-    if (servo_pid_ > 0 && kill(servo_pid_, SIGKILL) == 0) waitpid(servo_pid_, nullptr, 0);
+    if (servo_.pid > 0 && kill(servo_.pid, SIGKILL) == 0) waitpid(servo_.pid, nullptr, 0);
     (void)!chm_bp_leave();
     chm::test::remove_private_dir(dir_);
     failure("interrupted by a signal: workers killed, " + dir_ + " removed, nothing checked");
@@ -53,13 +53,15 @@ void Driver::quiesce() {
     const uint64_t up_by = now_ns() + 30000000000ull;
     for (Proc& p : procs_)
         if (p.state == Proc::Stopped) p.due = 0;
+    if (servo_.state == Proc::Stopped || servo_.state == Proc::Down) servo_.due = 0;
     for (bool all_up = false; !all_up && now_ns() < up_by; nap_witness(10)) {
         tick(false);
-        all_up = true;
+        all_up = servo_up();
         for (const Proc& p : procs_) all_up &= p.state == Proc::Up;
     }
     for (Proc& p : procs_)
         if (p.state != Proc::Up) failure(p.name() + " was not up again 30 s after the chaos ended");
+    if (!servo_up()) failure("the servo controller was not up again 30 s after the chaos ended (" + dir_ + "/servo.log)");
     stop_servo();  // while every RTPU is up: its modules off and killed, control given back
     for (unsigned i = 0; i < led_->workers; ++i) __atomic_store_n(&led_->w[i].quit, 1u, __ATOMIC_SEQ_CST);
     const uint64_t done_by = now_ns() + 10000000000ull;

@@ -81,12 +81,39 @@ typedef struct soak_worker {
     soak_msg_t rbuf;                  /* receive buffer: valid while magic is set */
 } soak_worker_t;
 
-/* The servo controller (servo_main.c): a host process the chaos spares;
- * it keeps modules on RTPUs 1..3 and switches them (modlog.h). */
+/* The servo controller (servo_main.c): a host process that keeps modules
+ * on RTPUs 1..3 and switches them (modlog.h). The chaos kills it and stops
+ * it too; each incarnation carries on from this record, which outlives it. */
 enum soak_servo_call { SOAK_SV_IDLE, SOAK_SV_TAKE, SOAK_SV_SPAWN, SOAK_SV_STATUS, SOAK_SV_SWITCH, SOAK_SV_KILL,
                        SOAK_SV_CALLS };
+/* The switch a controller is in, or whose outcome it has not checked yet:
+ * what a controller killed there leaves for the next one to verify (done
+ * on every module it named, or on none). Written before the call with
+ * phase set last; phase cleared once the outcome was checked. */
+typedef struct soak_servo_pend {
+    uint32_t phase;      /* 0 none; 1 chm_servo_switch under way; 2 it returned r, outcome unchecked */
+    int32_t r;
+    int32_t role[2];     /* going off, going on: role (modlog.h) or -1 */
+    int32_t rtpu[2], index[2];
+    uint32_t gen[2];
+    int32_t state[2];    /* each module's state before the call */
+    uint64_t switched_at[2]; /* and its switch instant */
+    uint64_t t_call, at_ns;  /* CLOCK_MONOTONIC before the call; T when it returned 0 */
+} soak_servo_pend_t;
 typedef struct soak_servo {
-    uint32_t quit, started, done, call; /* call: enum soak_servo_call under way */
+    uint32_t quit, done, call; /* call: enum soak_servo_call under way */
+    uint32_t inc;              /* driver -> controller: the incarnation started last (1, 2, ...) */
+    uint32_t started;          /* the incarnation that is up (attached, its modules found) */
+    uint32_t switched_inc;     /* the last incarnation with a switch that returned 0 */
+    uint32_t noting;           /* 1 while a defect or an unexpected status is being written down */
+    uint32_t pad0;
+    soak_servo_pend_t pend;
+    /* A restarted controller: modules found by name, RTPUs taken again,
+     * takes refused (a dead controller's control not given up), and the
+     * switches its predecessor left: found done everywhere, nowhere, or
+     * not to be judged (a module gone or unreadable). */
+    uint64_t adopted, takes_after_restart, take_refused;
+    uint64_t inherited_done, inherited_nothing, inherited_unverifiable;
     uint64_t hb_ns;                     /* the end of its last call */
     uint64_t takes, spawns, kills;
     uint64_t handovers, solo_switches, first_on;  /* switches that returned 0, by kind */

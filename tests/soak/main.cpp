@@ -175,7 +175,9 @@ namespace {
 [[noreturn]] void usage(const char* why) {
     std::fprintf(stderr,
                  "chimera-soak: %s\n"
-                 "usage: chimera-soak [--seconds N] [--seed N] [--rtpus N] [--hosts N] [--quiet]\n"
+                 "usage: chimera-soak [--seconds N] [--seed N] [--rtpus N] [--hosts N] [--quiet] [--no-servo-chaos]\n"
+                 "                    [--servo-fault 0|1|2] (every controller restarted in the chaos kills itself\n"
+                 "                    at servo.switch.prepared, committed_one or decided)\n"
                  "                    [--rtpu-bin PATH] [--host-bin PATH] [--worker PATH] [--bpcheck PATH]\n"
                  "                    [--servo-bin PATH]\n",
                  why);
@@ -200,6 +202,10 @@ int main(int argc, char** argv) {
     for (int i = 1; i < argc; ++i) {
         const std::string a = argv[i];
         const char* v = i + 1 < argc ? argv[i + 1] : nullptr;
+        if (a == "--no-servo-chaos") {
+            o.servo_chaos = false;
+            continue;
+        }
         if (a == "--quiet") {
             o.quiet = true;
             continue;
@@ -208,6 +214,7 @@ int main(int argc, char** argv) {
         ++i;
         if (a == "--seconds") o.seconds = unsigned(number("--seconds", v, 1, 86400));
         else if (a == "--seed") o.seed = number("--seed", v, 0, ~0ull >> 1);
+        else if (a == "--servo-fault") o.servo_fault = int(number("--servo-fault", v, 0, 2));
         else if (a == "--rtpus") o.rtpus = unsigned(number("--rtpus", v, 1, 4));
         else if (a == "--hosts") o.hosts = unsigned(number("--hosts", v, 0, 2));
         else if (a == "--rtpu-bin") o.rtpu_bin = v;

@@ -1,6 +1,7 @@
 // The soak's servo controller (servo_main.c, modlog.h) seen from the
-// driver: the variables and the cycle log it needs, its process (spared by
-// the chaos), its end, and the checks on what it and its modules did.
+// driver: the variables and the cycle log it needs, its process (killed,
+// stopped and restarted by the chaos: servo_chaos.cpp), its end, and the
+// checks on what it and its modules did.
 #include <cerrno>
 #include <cstdio>
 #include <cstdlib>
@@ -40,9 +41,25 @@ int Driver::servo_objects() {
     return 0;
 }
 
-void Driver::start_servo() {
+// The next incarnation: it carries on from the ledger (servo_main.c).
+// `fault`: a stop point of chm_servo_switch where it is to kill itself
+// (CHIMERA_FAULT_AT=<fault>:kill, the first time it passes it), or none.
+void Driver::start_servo(const char* fault) {
     if (!mlog_) return;
+    __atomic_store_n(&led_->servo.call, uint32_t(SOAK_SV_IDLE), __ATOMIC_SEQ_CST);
+    __atomic_store_n(&led_->servo.inc, led_->servo.inc + 1, __ATOMIC_SEQ_CST);
     const std::string log = dir_ + "/servo.log";
+    servo_fault_ = fault ? fault : "";
+    // Its environment, made before the fork: ours without CHIMERA_FAULT_AT
+    // and CHIMERA_STOP_AT, then the point.
+    std::vector<std::string> env;
+    for (char** e = environ; *e; ++e)
+        if (std::strncmp(*e, "CHIMERA_FAULT_AT=", 17) && std::strncmp(*e, "CHIMERA_STOP_AT=", 16)) env.push_back(*e);
+    if (fault) env.push_back(std::string("CHIMERA_FAULT_AT=") + fault + ":kill");
+    std::vector<char*> envp;
+    for (std::string& e : env) envp.push_back(e.data());
+    envp.push_back(nullptr);
+    const std::string seed = std::to_string(opt_.seed);
     std::fflush(nullptr);
     const pid_t parent = getpid();
     const pid_t pid = fork();
@@ -52,46 +69,49 @@ void Driver::start_servo() {
         setsid();
         const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_APPEND, 0600);
         if (fd >= 0) dup2(fd, 1), dup2(fd, 2);
-        const std::string seed = std::to_string(opt_.seed);
-        execl(opt_.servo_bin.c_str(), opt_.servo_bin.c_str(), bp_.c_str(), ledger_path_.c_str(),
-              opt_.mod_hand_so.c_str(), opt_.mod_solo_so.c_str(), seed.c_str(), (char*)nullptr);
+        execle(opt_.servo_bin.c_str(), opt_.servo_bin.c_str(), bp_.c_str(), ledger_path_.c_str(),
+               opt_.mod_hand_so.c_str(), opt_.mod_solo_so.c_str(), seed.c_str(), (char*)nullptr, envp.data());
         _exit(127);
     }
     if (pid < 0) failure(std::string("fork for the servo controller: ") + std::strerror(errno));
-    servo_pid_ = pid;
-}
-
-// Every tick: the controller never ends on its own.
-void Driver::watch_servo() {
-    int st = 0;
-    if (servo_pid_ > 0 && waitpid(servo_pid_, &st, WNOHANG) == servo_pid_) {
-        servo_pid_ = -1;
-        failure("the servo controller ended on its own, wait status " + num(unsigned(st)) + " (" + dir_ +
-                "/servo.log)");
-    }
+    servo_.pid = pid;
+    servo_.state = pid > 0 ? Proc::Starting : Proc::Down;
+    servo_.since = now_ns();
+    servo_.due = servo_.since + 1000000000u;  // Down: a failed fork is tried again
 }
 
 // The end, while every RTPU is up: it switches its modules off, kills
 // them, gives control back and leaves.
 void Driver::stop_servo() {
-    if (servo_pid_ <= 0) return;
+    if (servo_.pid <= 0) return;
+    servo_progress("at the end");
     soak_servo_t& s = led_->servo;
     __atomic_store_n(&s.quit, 1u, __ATOMIC_SEQ_CST);
     const uint64_t by = now_ns() + 60000000000ull;
     int st = 0;
-    while (waitpid(servo_pid_, &st, WNOHANG) != servo_pid_) {
+    while (waitpid(servo_.pid, &st, WNOHANG) != servo_.pid) {
         if (now_ns() > by) {
             failure(std::string("the servo controller did not end within 60 s of quit (in call ") +
                     call_name(s.call) + ")");
-            kill(servo_pid_, SIGKILL);
-            waitpid(servo_pid_, &st, 0);
+            kill(servo_.pid, SIGKILL);
+            waitpid(servo_.pid, &st, 0);
             break;
         }
         nap_ms(5);
     }
-    servo_pid_ = -1;
+    servo_.pid = -1;
+    servo_.state = Proc::Down;
     if (!WIFEXITED(st) || WEXITSTATUS(st) != 0)
         failure("the servo controller ended with wait status " + num(unsigned(st)));
+    // While every RTPU is still up (check_servo runs after they stopped,
+    // which ends any claim): the last incarnation killed every module,
+    // those its predecessors spawned included.
+    for (const char* name : {"soak.hand", "soak.solo"}) {
+        chm_svar_info_t info{};
+        if (chm_svar_info(name, &info) == 0 && info.has_writer)
+            failure(std::string(name) + " still has a writer after the servo controller (incarnation " +
+                    num(s.inc) + ") ended: " + info.writer);
+    }
 }
 
 // What the controller saw (a switch done somewhere but not everywhere, a
@@ -101,13 +121,18 @@ void Driver::stop_servo() {
 void Driver::check_servo() {
     if (!mlog_) return;
     const soak_servo_t& s = led_->servo;
-    if (s.defects) failure(num(s.defects) + " servo defects, the last: " + s.last_defect);
+    const std::string maybe = n_.sv_kills_noting ? " (a controller was killed while writing one down " +
+                                                      num(n_.sv_kills_noting) + " times: the text may be an "
+                                                      "earlier one's)"
+                                                : "";
+    if (s.defects) failure(num(s.defects) + " servo defects, the last: " + s.last_defect + maybe);
     // For diagnosis (the directory goes at the end): the controller's log,
     // every switch and every time A and B both showed ON.
     if (const char* keep = std::getenv("SOAK_KEEP_SERVO_LOG"))
         if (std::system(("cp " + dir_ + "/servo.log '" + keep + "'").c_str()) != 0)
             std::fprintf(stderr, "soak: could not copy the servo log to %s\n", keep);
-    if (s.errors) failure("servo controller: " + num(s.errors) + " unexpected statuses, the last: " + s.last_err_text);
+    if (s.errors)
+        failure("servo controller: " + num(s.errors) + " unexpected statuses, the last: " + s.last_err_text + maybe);
     if (s.worst_call_ns > bound_ns_)
         failure(std::string("a servo call took ") + num(s.worst_call_ns / 1000000u) + " ms (" +
                 call_name(s.worst_call) + "; bound " + num(bound_ns_ / 1000000u) + " ms)");
@@ -142,6 +167,22 @@ void Driver::check_servo() {
                                " ms), " + num(s.errors_cleared) + " cleared from ERROR, " + num(s.kills) +
                                " killed at the end; " + num(s.calls) + " calls, the longest " +
                                num(s.worst_call_ns / 1000000u) + " ms (" + call_name(s.worst_call) + ")";
+    std::string in;
+    for (unsigned c = 0; c < SOAK_SV_CALLS; ++c)
+        in += std::string(c ? ", " : "") + call_name(c) + " " + num(n_.sv_kills_in[c]);
+    report_["servo_chaos"] =
+        "controller kills " + num(n_.sv_kills) + " (aimed at a switch " + num(n_.sv_kills_aimed) +
+        "; by itself at servo.switch.prepared " + num(n_.sv_self_killed[0]) + " of " + num(n_.sv_armed[0]) +
+        " armed, committed_one " + num(n_.sv_self_killed[1]) + " of " + num(n_.sv_armed[1]) + ", decided " +
+        num(n_.sv_self_killed[2]) + " of " + num(n_.sv_armed[2]) + ", their switches found as the protocol says " +
+        num(n_.sv_fault_as_promised) + ", not judgeable " + num(n_.sv_fault_unknown) + "; in call: " + in + "; with a switch unchecked " +
+        num(n_.sv_kills_pend) + "; while stopped " + num(n_.sv_kills_stopped) + ", while starting " +
+        num(n_.sv_kills_starting) + ", while writing a defect down " + num(n_.sv_kills_noting) + "), stops " +
+        num(n_.sv_stops) + ", restarts " + num(n_.sv_restarts) + " (" + num(s.inc) + " incarnations; " +
+        num(n_.sv_judged) + " up 10 s or more, of them " + num(n_.sv_idle) + " without a switch); restarted: modules found by name " +
+        num(s.adopted) + ", takes after restart " + num(s.takes_after_restart) + ", takes refused as held " +
+        num(s.take_refused) + "; switches a killed controller left: done everywhere " + num(s.inherited_done) +
+        ", nowhere " + num(s.inherited_nothing) + ", could not tell " + num(s.inherited_unverifiable);
     report_["servo_cycles"] = "A " + num(mlog_->cycles[0]) + ", B " + num(mlog_->cycles[1]) + ", S " +
                               num(mlog_->cycles[2]) + "; soak.hand cycles with two writers " + num(both) +
                               ", with none (a dead or stopped RTPU's) " + num(neither) + "; soak.hand reads " +

@@ -1,7 +1,8 @@
 /* chimera-soak-servo: the chaos soak's servo controller (docs/backplane.md,
- * "Chaos soak"; modlog.h). A host process the chaos spares; while the
- * driver kills, stops and restarts RTPUs 1..3 it keeps modules on them and
- * switches them, through the public servo API only:
+ * "Chaos soak"; modlog.h). A host process (killed and stopped by the chaos
+ * too, below); while the driver kills, stops and restarts RTPUs 1..3 it
+ * keeps modules on them and switches them, through the public servo API
+ * only:
  *   - A (RTPU 1) and B (RTPU 2) write soak.hand; one of them is kept ON and
  *     the variable is handed from it to the other at every step;
  *   - S (RTPU 3) writes soak.solo and is switched on and off alone.
@@ -12,6 +13,14 @@
  * going on is ON, the one going off OFF, both switched at or after the
  * instant T), and a refused one on none (each state and switch instant as
  * before). Every call's duration is kept: a dead RTPU must not hang it.
+ * The chaos kills and stops this process too (the driver starts the next
+ * incarnation, sv->inc): each one carries on from the ledger (counters,
+ * the last defect), finds the modules still there by their instance names,
+ * first verifies the switch a killed predecessor was in or had not checked
+ * (sv->pend: done on every module it named, or on none, once the servo
+ * protocol's instant T has passed) and takes its RTPUs again: control held
+ * by a dead process must be given up (a take refused as held is a
+ * defect). See servo_inherit.c.
  * argv: BACKPLANE LEDGER HAND_MODULE SOLO_MODULE SEED. Exit 0 after quit. */
 #define _GNU_SOURCE /* clock_gettime, nanosleep, O_CLOEXEC under -std=c11 */
 #include <chimera/bp.h>
@@ -28,42 +37,23 @@
 #include <time.h>
 #include <unistd.h>
 
-#include "ledger.h"
-#include "modlog.h"
+#include "servo_ctl.h"
 
-#define ST(field, v) __atomic_store_n(&(field), (v), __ATOMIC_SEQ_CST)
-#define LD(field) __atomic_load_n(&(field), __ATOMIC_SEQ_CST)
-
-typedef struct role {
-    const char* name; /* instance name */
-    int rtpu;
-    unsigned index;   /* A 0, B 1, S 2: the module's "role" parameter */
-    const char* path;
-    int have;         /* spawned and not seen gone */
-    chm_servo_module_t id;
-    chm_servo_status_t st; /* last status read (valid while have) */
-} role_t;
-
-/* How long a module may show a state a refused switch armed it for: a
- * switch refused with -ETIME whose resolve did not reach a module's RTPU
- * (stopped, its ring full of abandoned requests) leaves the module going
- * on ON, armed, until the instant T, when its task reads the decision cell
- * (aborted) and goes OFF without running a cycle; T lies up to 4 prepare
- * round trips ahead (a stopped RTPU's: up to the longest stop, 1 s). */
-#define SETTLE_NS 10000000000ull
-
-static soak_servo_t* sv;
+soak_servo_t* sv;
+uint32_t inc; /* this incarnation */
 static uint64_t busy_since; /* the first of the refusals as busy in a row, 0 none */
 static int controlled[SOAK_MOD_ROLES + 1];
+static int taken_before[SOAK_MOD_ROLES + 1];     /* this incarnation took RTPU n once */
+static unsigned take_refused_run[SOAK_MOD_ROLES + 1]; /* takes of RTPU n refused as held in a row */
 static uint64_t rng, call_t0;
 
-static uint64_t now_ns(void) {
+uint64_t now_ns(void) {
     struct timespec ts;
     clock_gettime(CLOCK_MONOTONIC, &ts);
     return (uint64_t)ts.tv_sec * 1000000000ull + (uint64_t)ts.tv_nsec;
 }
 
-static void nap_ms(unsigned ms) {
+void nap_ms(unsigned ms) {
     struct timespec ts = {(time_t)(ms / 1000u), (long)(ms % 1000u) * 1000000L};
     nanosleep(&ts, NULL);
 }
@@ -75,13 +65,13 @@ static uint64_t rnd(void) {
     return rng * 2685821657736338717ull;
 }
 
-static void begin(uint32_t call) {
+void begin(uint32_t call) {
     ST(sv->call, call);
     call_t0 = now_ns();
 }
 
 /* The call ended: its duration, and the heartbeat. */
-static uint64_t end(void) {
+uint64_t end(void) {
     const uint64_t d = now_ns() - call_t0;
     ++sv->calls;
     if (d > sv->worst_call_ns) {
@@ -93,26 +83,32 @@ static uint64_t end(void) {
     return d;
 }
 
-static void unexpected(int r, const char* what, const char* name) {
-    ++sv->errors;
+/* Counted first, then described, with sv->noting set meanwhile: a kill in
+ * between leaves the count right and the driver told that the text may be
+ * the one before (it reads noting after the kill). */
+void unexpected(int r, const char* what, const char* name) {
+    ST(sv->noting, 1u);
+    ST(sv->errors, sv->errors + 1);
     sv->last_err = r;
     snprintf(sv->last_err_text, sizeof sv->last_err_text, "%s %s: %d %s", what, name, r, chm_err_last());
+    ST(sv->noting, 0u);
     fprintf(stderr, "soak servo: unexpected: %s\n", sv->last_err_text);
 }
 
-static void defect(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
-static void defect(const char* fmt, ...) {
+void defect(const char* fmt, ...) {
+    ST(sv->noting, 1u);
+    ST(sv->defects, sv->defects + 1);
     va_list ap;
     va_start(ap, fmt);
     vsnprintf(sv->last_defect, sizeof sv->last_defect, fmt, ap);
     va_end(ap);
-    ++sv->defects;
-    fprintf(stderr, "soak servo: DEFECT: %s\n", sv->last_defect);
+    ST(sv->noting, 0u);
+    fprintf(stderr, "soak servo: DEFECT (incarnation %u): %s\n", inc, sv->last_defect);
 }
 
 /* The RTPU (or the module) is gone, restarted under us, stopped past the
  * express-mail bound or its ring full: try again later. */
-static int transient(int r) {
+int transient(int r) {
     return r == -EHOSTDOWN || r == -ESTALE || r == -EPERM || r == -ETIMEDOUT || r == -EBUSY;
 }
 
@@ -122,7 +118,7 @@ static void lost(role_t* m) {
 }
 
 /* Read m's status; 1 with m->st filled, 0 when gone (counted) or unknown. */
-static int refresh(role_t* m) {
+int refresh(role_t* m) {
     if (!m->have) return 0;
     chm_servo_status_t st;
     begin(SOAK_SV_STATUS);
@@ -152,20 +148,39 @@ static int refresh(role_t* m) {
     return 0;
 }
 
+/* Take control of RTPU n; 1 when this process holds it. The only other
+ * controller these RTPUs have had is an incarnation of this one that the
+ * driver killed and reaped before it started this one: a take refused as
+ * held ("controlled by", the holder's slot) means a dead process's control
+ * was not given up. A defect at once (each run of refusals once): an RTPU
+ * restarted meanwhile would hide it, and RTPUs restart every few seconds. */
+static int take_rtpu(int n, const char* name) {
+    begin(SOAK_SV_TAKE);
+    const int r = chm_servo_take(1u << n);
+    end();
+    if (r == 0) {
+        controlled[n] = 1;
+        ++sv->takes;
+        if (inc > 1 && !taken_before[n]) ++sv->takes_after_restart;
+        taken_before[n] = 1;
+        take_refused_run[n] = 0;
+        return 1;
+    }
+    if (r == -EBUSY && strstr(chm_err_last(), "controlled by")) {
+        ++sv->take_refused;
+        if (!take_refused_run[n]++)
+            defect("incarnation %u: RTPU %d refused control as held, and no controller but dead ones was ever "
+                   "there: %s", inc, n, chm_err_last());
+        return 0;
+    }
+    if (!transient(r)) unexpected(r, "take", name);
+    return 0;
+}
+
 /* Take m's RTPU if needed and spawn m there, OFF. */
 static void ensure(role_t* m) {
     if (m->have) return;
-    if (!controlled[m->rtpu]) {
-        begin(SOAK_SV_TAKE);
-        const int r = chm_servo_take(1u << m->rtpu);
-        end();
-        if (r) {
-            if (!transient(r)) unexpected(r, "take", m->name);
-            return;
-        }
-        controlled[m->rtpu] = 1;
-        ++sv->takes;
-    }
+    if (!controlled[m->rtpu] && !take_rtpu(m->rtpu, m->name)) return;
     chm_servo_spawn_t s;
     chm_servo_spawn_init(&s);
     s.rtpu = m->rtpu;
@@ -261,15 +276,19 @@ static void do_switch(role_t* off, role_t* on, uint64_t* kind) {
     chm_servo_status_t b_off = off ? off->st : (chm_servo_status_t){0};
     chm_servo_status_t b_on = on ? on->st : (chm_servo_status_t){0};
     uint64_t t = 0;
+    pend_begin(off, on);
     begin(SOAK_SV_SWITCH);
     const int r = chm_servo_switch(off ? &off->id : NULL, off ? 1 : 0, on ? &on->id : NULL, on ? 1 : 0, 0, &t);
     end();
+    pend_returned(r, t);
     fprintf(stderr, "switch off %s on %s: %d at %llu (now %llu)\n", off ? off->name : "-", on ? on->name : "-", r,
             (unsigned long long)t, (unsigned long long)now_ns());
     if (r == 0) {
         ++*kind;
+        ST(sv->switched_inc, inc);
         busy_since = 0;
         check_done(off, on, t);
+        ST(sv->pend.phase, 0u);
         return;
     }
     if (r != -EALREADY && r != -EBUSY) busy_since = 0;
@@ -287,10 +306,12 @@ static void do_switch(role_t* off, role_t* on, uint64_t* kind) {
     else if (transient(r)) ++sv->refused_gone;
     else {
         unexpected(r, "switch", on ? on->name : off->name);
+        ST(sv->pend.phase, 0u);
         return;
     }
     if (r == -EPERM) controlled[(off ? off : on)->rtpu] = 0, controlled[(on ? on : off)->rtpu] = 0;
     check_nothing(off, on, &b_off, &b_on);
+    ST(sv->pend.phase, 0u);
 }
 
 /* soak.hand must always be one whole value. */
@@ -336,6 +357,9 @@ static void step(role_t* a, role_t* b, role_t* s) {
     role_t* all[3] = {a, b, s};
     for (int i = 0; i < 3; ++i) {
         (void)refresh(all[i]);
+        /* A module found by name (or one whose RTPU a status said is not
+         * ours any more): control taken again first. */
+        if (all[i]->have && !controlled[all[i]->rtpu]) (void)take_rtpu(all[i]->rtpu, all[i]->name);
         ensure(all[i]);
     }
     const int a_on = a->have && a->st.state == CHM_SERVO_ON, b_on = b->have && b->st.state == CHM_SERVO_ON;
@@ -390,21 +414,25 @@ int main(int argc, char** argv) {
         return fprintf(stderr, "chimera-soak-servo: ledger layout %u bytes, this build %zu: rebuild\n",
                        ((soak_ledger_t*)map)->layout, sizeof(soak_ledger_t)), 1;
     sv = &((soak_ledger_t*)map)->servo;
-    rng = (strtoull(argv[5], NULL, 10) * 0x9E3779B97F4A7C15ull) | 1u;
+    inc = LD(sv->inc);
+    rng = ((strtoull(argv[5], NULL, 10) + 0x5851F42D4C957F2Dull * (inc - 1u)) * 0x9E3779B97F4A7C15ull) | 1u;
+    fprintf(stderr, "soak servo: incarnation %u starts (pid %d)\n", inc, (int)getpid());
     int r = chm_bp_attach_host(argv[1], "soak-servo", NULL);
     if (r) return fprintf(stderr, "chimera-soak-servo: attach %s: %d %s\n", argv[1], r, chm_bp_last_error()), 1;
     role_t a = {.name = "soakA", .rtpu = 1, .index = 0, .path = argv[3]};
     role_t b = {.name = "soakB", .rtpu = 2, .index = 1, .path = argv[3]};
     role_t s = {.name = "soakS", .rtpu = 3, .index = 2, .path = argv[4]};
     role_t* all[SOAK_MOD_ROLES] = {&a, &b, &s};
+    adopt(all);            /* the modules a killed predecessor left */
+    verify_inherited();    /* and the switch it was in */
     ST(sv->hb_ns, now_ns());
-    ST(sv->started, 1u);
+    ST(sv->started, inc);
     while (!LD(sv->quit)) {
         step(&a, &b, &s);
         nap_ms((unsigned)(20 + rnd() % 80));
     }
     wind_up(all);
-    ST(sv->done, 1u);
+    ST(sv->done, inc);
     r = chm_bp_leave();
     if (r) fprintf(stderr, "chimera-soak-servo: leave: %d %s\n", r, chm_bp_last_error());
     return r ? 1 : 0;

@@ -31,6 +31,10 @@ struct Options {
     unsigned stop_max_ms = 1000;  // longest SIGSTOP
     unsigned slack_ms = 5000;     // scheduling allowance of the stall bound (loaded shared host)
     unsigned gap_min_ms = 100, gap_max_ms = 500; // between chaos actions
+    // Between chaos actions on the servo controller (a kill, or a stop).
+    unsigned servo_gap_min_ms = 2000, servo_gap_max_ms = 12000;
+    bool servo_chaos = true;  // --no-servo-chaos: spare the controller
+    int servo_fault = -1;     // --servo-fault N: every incarnation started in the chaos kills itself at point N
     // The programs it runs; meson builds the paths in (soak/meson.build).
     std::string rtpu_bin = SOAK_RTPU_BIN, host_bin = SOAK_HOST_BIN, worker_so = SOAK_WORKER_SO,
                 bpcheck_bin = SOAK_BPCHECK_BIN, servo_bin = SOAK_SERVO_BIN, mod_hand_so = SOAK_MOD_HAND_SO,
@@ -61,6 +65,18 @@ struct Counts {
     uint64_t units_returned = 0, sem_doubt = 0, shm_doubt = 0, dead_bufs_partial = 0;
     uint64_t svar_doubt[SOAK_SVAR_MAX + 1] = {};  // per soak.vr: writes a death left in doubt
     uint64_t stall_samples = 0;
+    // The servo controller: kills (by the call it was in: enum
+    // soak_servo_call), with a switch unchecked, while stopped or starting,
+    // while it wrote a defect down; stops; restarts; incarnations up long
+    // enough to be judged (each must switch something).
+    uint64_t sv_kills = 0, sv_kills_in[SOAK_SV_CALLS] = {}, sv_kills_pend = 0, sv_kills_stopped = 0;
+    uint64_t sv_kills_starting = 0, sv_kills_noting = 0, sv_stops = 0, sv_restarts = 0, sv_judged = 0;
+    uint64_t sv_kills_aimed = 0;  // kills that waited for a switch under way
+    // Incarnations started to kill themselves at a stop point inside
+    // chm_servo_switch (servo_chaos.cpp: kServoFaults), and those that did.
+    uint64_t sv_armed[3] = {}, sv_self_killed[3] = {};
+    uint64_t sv_fault_as_promised = 0, sv_fault_unknown = 0;  // their switches, as the successor found them
+    uint64_t sv_idle = 0;         // incarnations judged that switched nothing (each a failure)
 };
 
 // The worst stall one survivor showed, and what it was doing.
@@ -99,10 +115,18 @@ public:
 
     // servo.cpp
     int servo_objects();
-    void start_servo();
-    void watch_servo();
+    void start_servo(const char* fault = nullptr);
     void stop_servo();
     void check_servo();
+    // servo_chaos.cpp
+    void watch_servo(bool chaos);
+    void servo_kill();
+    void servo_dead(bool stopped, bool starting);
+    void servo_expected();
+    void servo_stop();
+    void servo_progress(const std::string& when);
+    bool servo_up() const { return !mlog_ || servo_.state == Proc::Up; }
+    uint64_t srnd();
 
     // finish.cpp
     void finish();
@@ -125,7 +149,11 @@ public:
     chm_rsem_t* sem_ = nullptr;
     soak_shm_t* shm_ = nullptr;
     soak_modlog_t* mlog_ = nullptr;  // null: no servo controller (fewer than 3 RTPUs)
-    pid_t servo_pid_ = -1;
+    Proc servo_;  // the controller's process: Down, Starting, Up or Stopped; floor: when it was up
+    uint64_t srng_ = 0, servo_next_ = 0;  // its own random sequence (from the seed) and next action
+    std::string servo_fault_;  // the stop point its incarnation kills itself at, if any
+    int sv_expect_ = -1;       // the stop point the last one died at, its switch not yet verified
+    uint64_t sv_inh_[3] = {};  // the successor's inherited_* counts then
     uint64_t rng_ = 0, t0_ = 0, next_action_ = 0, last_tick_ = 0, worst_tick_gap_ = 0;
     uint64_t bound_ns_ = 0;
     Counts n_;

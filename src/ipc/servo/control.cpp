@@ -10,6 +10,7 @@
 #include "chimera/bp.h"
 #include "chimera/kernel.h"
 #include "chimera/rtpu.h"
+#include "ipc/backplane/stop_point.hpp"
 #include "ipc/err/report.hpp"
 #include "kernel/err/last.hpp"
 #include "ipc/servo/servo.hpp"
@@ -34,6 +35,21 @@ void say(const char* fmt, ...) {
     std::vsnprintf(t_error, sizeof t_error, fmt, ap);
     va_end(ap);
     kernel::err_last_set(t_error);  // chm_err_last
+}
+
+// The exit of every servo call: chm::ipc::leave, then this call's own
+// message (t_error: the RTPU's text, the switch's reason) kept for
+// chm_err_last whatever the status. ipc::leave keeps a message only for a
+// status that raises; for an outcome (-EBUSY: the RTPU is held, naming the
+// holder's slot; -ETIME; -EALREADY) it left "call: strerror", and the
+// holder or the module the header promises was lost.
+int leave(int r, const char* call) {
+    r = chm::ipc::leave(r, call);
+    if (r < 0 && t_error[0]) {
+        kernel::err_last_set(t_error);
+        kernel::err_last_failed(call, r, true);  // kept; no longer fresh, as after any exit
+    }
+    return r;
 }
 
 std::uint64_t now_ns() {
@@ -178,6 +194,11 @@ int switch_impl(const chm_servo_module_t* off, size_t n_off, const chm_servo_mod
         parts.erase(parts.begin() + std::ptrdiff_t(k));
     }
     if (parts.empty()) return -EAGAIN;
+    // Where a controller may die inside a switch (the chaos soak kills its
+    // controller at each, CHIMERA_FAULT_AT=<name>:kill): prepared, nothing
+    // armed; one part committed, the cell open; the cell committed, no
+    // part told.
+    CHM_STOP_POINT("servo.switch.prepared");
     // Phase 2 at T: the first common boundary far enough ahead for every
     // commit, and the decision, to land before it. The decision cell makes
     // it all or nothing: every part reads it at T and acts only if it was
@@ -205,7 +226,10 @@ int switch_impl(const chm_servo_module_t* off, size_t n_off, const chm_servo_mod
     };
     for (std::size_t k = 0; k < parts.size(); ++k) {
         const int r = send_switch(kCommit, parts[k], at, off_names, sw);
-        if (r == 0) continue;
+        if (r == 0) {
+            CHM_STOP_POINT("servo.switch.committed_one");
+            continue;
+        }
         char why[sizeof t_error];
         std::snprintf(why, sizeof why, "%s", t_error);
         // Nothing acted yet: no part acts before T, and none will on an
@@ -221,6 +245,7 @@ int switch_impl(const chm_servo_module_t* off, size_t n_off, const chm_servo_mod
         say("chm_servo_switch: the switch instant passed before every RTPU had its commit (nothing switched)");
         return -ETIME;
     }
+    CHM_STOP_POINT("servo.switch.decided");
     resolve_all(svar::kCellCommitted);
     if (at_ns) *at_ns = at;
     return left_out ? -EAGAIN : 0;
@@ -242,31 +267,32 @@ void chm_servo_spawn_init(chm_servo_spawn_t* s) {
 
 int chm_servo_take(uint32_t rtpus) {
     t_error[0] = 0;
-    if (!rtpus) return chm::ipc::leave((say("chm_servo_take: no RTPU in the mask"), -EINVAL), "chm_servo_take");
+    if (!rtpus) return leave((say("chm_servo_take: no RTPU in the mask"), -EINVAL), "chm_servo_take");
     for (int n = 0; n < 32; ++n) {
         if (!(rtpus >> n & 1)) continue;
         if (int r = call(n, kTake, nullptr, 0)) {
             for (int k = 0; k < n; ++k)
                 if (rtpus >> k & 1) call(k, kRelease, nullptr, 0);
-            return chm::ipc::leave(r, "chm_servo_take");
+            return leave(r, "chm_servo_take");
         }
     }
     return 0;
 }
 
 int chm_servo_release(uint32_t rtpus) {
+    t_error[0] = 0;
     int first = 0;
     for (int n = 0; n < 32; ++n)
         if (rtpus >> n & 1)
             if (int r = call(n, kRelease, nullptr, 0); r && !first) first = r;
-    return chm::ipc::leave(first, "chm_servo_release");
+    return leave(first, "chm_servo_release");
 }
 
 int chm_servo_spawn(const chm_servo_spawn_t* s, chm_servo_module_t* out) {
     t_error[0] = 0;
     auto fail = [](int r, const char* fmt, const char* what) {
         say(fmt, what);
-        return chm::ipc::leave(r, "chm_servo_spawn");
+        return leave(r, "chm_servo_spawn");
     };
     if (!s || !out || !s->path || !s->name || !s->name[0] || (s->n_params && (!s->param_names || !s->param_values)))
         return fail(-EINVAL, "chm_servo_spawn: NULL request, path, name or parameter list%s", "");
@@ -296,7 +322,7 @@ int chm_servo_spawn(const chm_servo_spawn_t* s, chm_servo_module_t* out) {
     std::memcpy(body.data() + sizeof q + q.n_params * sizeof(ParamOverride), s->path, q.path_len);
     Ref ref{};
     const int r = call(s->rtpu, kSpawn, body.data(), body.size(), &ref, sizeof ref);
-    if (r) return chm::ipc::leave(r, "chm_servo_spawn");
+    if (r) return leave(r, "chm_servo_spawn");
     *out = chm_servo_module_t{s->rtpu, ref.index, ref.gen};
     return 0;
 }
@@ -304,7 +330,7 @@ int chm_servo_spawn(const chm_servo_spawn_t* s, chm_servo_module_t* out) {
 int chm_servo_find(int rtpu, const char* name, chm_servo_module_t* out) {
     t_error[0] = 0;
     if (!name || !out || std::strlen(name) >= kNameLen)
-        return chm::ipc::leave((say("chm_servo_find: NULL or too long a name"), -EINVAL), "chm_servo_find");
+        return leave((say("chm_servo_find: NULL or too long a name"), -EINVAL), "chm_servo_find");
     FindReq q{};
     std::snprintf(q.name, sizeof q.name, "%s", name);
     chm_bp_status_t st;
@@ -323,7 +349,7 @@ int chm_servo_find(int rtpu, const char* name, chm_servo_module_t* out) {
 
 int chm_servo_switch(const chm_servo_module_t* off, size_t n_off, const chm_servo_module_t* on, size_t n_on,
                      unsigned flags, uint64_t* at_ns) {
-    return chm::ipc::leave(switch_impl(off, n_off, on, n_on, flags, at_ns), "chm_servo_switch");
+    return leave(switch_impl(off, n_off, on, n_on, flags, at_ns), "chm_servo_switch");
 }
 
 int chm_servo_on(chm_servo_module_t m) { return chm_servo_switch(nullptr, 0, &m, 1, 0, nullptr); }
@@ -332,29 +358,29 @@ int chm_servo_off(chm_servo_module_t m) { return chm_servo_switch(&m, 1, nullptr
 int chm_servo_control(chm_servo_module_t m, const char* param, double value) {
     t_error[0] = 0;
     if (!param || std::strlen(param) >= kNameLen)
-        return chm::ipc::leave((say("chm_servo_control: NULL or too long a parameter name"), -EINVAL), "chm_servo_control");
+        return leave((say("chm_servo_control: NULL or too long a parameter name"), -EINVAL), "chm_servo_control");
     ControlReq q{};
     q.ref = ref_of(m);
     std::snprintf(q.name, sizeof q.name, "%s", param);
     q.value = value;
-    return chm::ipc::leave(call(m.rtpu, kControl, &q, sizeof q), "chm_servo_control");
+    return leave(call(m.rtpu, kControl, &q, sizeof q), "chm_servo_control");
 }
 
 int chm_servo_clear(chm_servo_module_t m) {
     t_error[0] = 0;
     const Ref r = ref_of(m);
-    return chm::ipc::leave(call(m.rtpu, kClear, &r, sizeof r), "chm_servo_clear");
+    return leave(call(m.rtpu, kClear, &r, sizeof r), "chm_servo_clear");
 }
 
 int chm_servo_kill(chm_servo_module_t m) {
     t_error[0] = 0;
     const Ref r = ref_of(m);
-    return chm::ipc::leave(call(m.rtpu, kKill, &r, sizeof r), "chm_servo_kill");
+    return leave(call(m.rtpu, kKill, &r, sizeof r), "chm_servo_kill");
 }
 
 int chm_servo_status(chm_servo_module_t m, chm_servo_status_t* out) {
     t_error[0] = 0;
-    if (!out) return chm::ipc::leave((say("chm_servo_status: NULL out"), -EINVAL), "chm_servo_status");
+    if (!out) return leave((say("chm_servo_status: NULL out"), -EINVAL), "chm_servo_status");
     StatusReply s;
     const int r = status_of(m, &s);
     std::memset(out, 0, sizeof *out);
@@ -363,7 +389,7 @@ int chm_servo_status(chm_servo_module_t m, chm_servo_status_t* out) {
         std::snprintf(out->last_error, sizeof out->last_error, "%s", t_error);
         return 0;
     }
-    if (r) return chm::ipc::leave(r, "chm_servo_status");
+    if (r) return leave(r, "chm_servo_status");
     std::memcpy(out->name, s.name, sizeof out->name);
     out->name[CHM_SERVO_NAME_MAX] = 0;
     std::memcpy(out->module, s.module, sizeof out->module);
