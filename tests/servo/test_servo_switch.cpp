@@ -7,6 +7,8 @@
 #include <gtest/gtest.h>
 
 #include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
@@ -18,6 +20,7 @@
 #include <thread>
 
 #include "chimera/chimera.h"
+#include "ipc/backplane/stop_point.hpp"  // stop::reload, for a forked controller
 #include "servo_fixture.hpp"
 
 using namespace chm::test;
@@ -117,6 +120,60 @@ TEST_F(Servo, ASwitchOneRtpuCannotCommitInTimeSwitchesNothingAnywhere) {
     EXPECT_EQ(*std::max_element(log_d1->k, log_d1->k + log_d1->count), kt - 1) << "d1 stopped at T";
     EXPECT_EQ(*std::min_element(log_c3->k, log_c3->k + log_c3->count), kt) << "c3 started at T";
     EXPECT_EQ(*std::min_element(log_a1->k, log_a1->k + log_a1->count), kt) << "a1 started at T";
+}
+
+// A controller that dies inside a switch before deciding it (its decision
+// cell taken and still open) does not take the cell with it for good: with
+// every one of the 64 cells held that way, the next switch gives back
+// those of dead controllers and is done. Before, after 64 such deaths
+// every switch was refused -EBUSY for the life of the backplane file.
+// None of the dead controllers' switches happened (the module stayed OFF).
+TEST_F(Servo, DecisionCellsOfControllersThatDiedBeforeDecidingAreGivenBack) {
+    chm_servo_module_t m;
+    ASSERT_EQ(spawn(1, COUNTER_SO, "c", 2 * kMs, &m), 0) << chm_servo_last_error();
+    make_log("c");
+    ASSERT_EQ(chm_servo_release(1u << 1 | 1u << 2), 0) << chm_servo_last_error();
+    ASSERT_EQ(chm_bp_leave(), 0) << chm_bp_last_error();  // each child is a controller in turn
+    constexpr int kDeaths = 64 + 3;
+    int died_deciding = 0;
+    std::string other;
+    for (int k = 0; k < kDeaths; ++k) {
+        std::fflush(nullptr);
+        const pid_t child = fork();
+        if (child == 0) {
+            alarm(60);
+            // Killed with its cell open: commits sent, nothing decided.
+            setenv("CHIMERA_FAULT_AT", "servo.switch.committed_one:kill", 1);
+            chm::stop::reload();
+            chm_servo_module_t c;
+            if (chm_bp_attach_host(bp_.c_str(), "dying", nullptr) != 0) _exit(10);
+            if (chm_servo_take(1u << 1) != 0) _exit(11);
+            if (chm_servo_find(1, "c", &c) != 0) _exit(12);
+            int r;
+            while ((r = chm_servo_on(c)) == -ETIME || r == -EALREADY) {
+            }
+            _exit(r == -EBUSY ? 13 : 14);  // never reached the point
+        }
+        ASSERT_GT(child, 0);
+        int st = 0;
+        ASSERT_EQ(waitpid(child, &st, 0), child);
+        if (WIFSIGNALED(st) && WTERMSIG(st) == SIGKILL) ++died_deciding;
+        else if (other.empty()) other = "controller " + std::to_string(k) + " ended with status " +
+                                         std::to_string(WIFEXITED(st) ? WEXITSTATUS(st) : -1) + " (13: -EBUSY)";
+    }
+    EXPECT_EQ(died_deciding, kDeaths) << other;
+    ASSERT_EQ(chm_bp_attach_host(bp_.c_str(), "last", nullptr), 0) << chm_bp_last_error();
+    ASSERT_EQ(chm_servo_take(1u << 1), 0) << chm_servo_last_error();
+    ASSERT_EQ(chm_servo_find(1, "c", &m), 0) << chm_servo_last_error();
+    // The last dead controller's module shows ON, armed, until that
+    // switch's instant T, when it reads the open cell and goes OFF again.
+    for (int ms = 0; ms < 10000 && status(m).state != CHM_SERVO_OFF; ++ms) nap_ms(1);
+    EXPECT_EQ(status(m).state, CHM_SERVO_OFF) << "a switch no controller decided happened";
+    EXPECT_EQ(status(m).cycles, 0u) << "a switch no controller decided ran a cycle";
+    EXPECT_EQ(on_until_done(m), 0) << chm_servo_last_error();
+    EXPECT_EQ(status(m).state, CHM_SERVO_ON);
+    EXPECT_EQ(off_until_done(m), 0) << chm_servo_last_error();
+    EXPECT_EQ(chm_servo_kill(m), 0) << chm_servo_last_error();
 }
 
 }  // namespace

@@ -26,10 +26,12 @@ namespace soak {
 
 namespace {
 constexpr uint64_t kJudgedNs = 10000000000ull;  // an incarnation up this long must have switched
-// A controller killed between taking a switch's decision cell and freeing
-// it leaves the cell taken for the life of the file (docs/architecture.md);
-// 64 of them refuse every switch. Past this many kills inside a switch the
-// chaos neither aims kills at switches nor arms the points past the cell.
+// A controller killed after it decided a switch (cell COMMITTED) and
+// before it freed the cell leaves the cell taken for the life of the file
+// (docs/architecture.md); 64 of them refuse every switch. One killed with
+// its cell still open does not: the next switch short of cells gives it
+// back. Past this many kills inside a switch the chaos neither aims kills
+// at switches (they may land after the decision) nor arms the point past it.
 constexpr uint64_t kCellKillsMax = 40;
 const char* const kServoFaults[3] = {"servo.switch.prepared", "servo.switch.committed_one", "servo.switch.decided"};
 template <class T>
@@ -53,7 +55,7 @@ void Driver::watch_servo(bool chaos) {
         if (now >= servo_.due) {
             unsigned f = chaos && opt_.servo_chaos && srnd() % 2 ? unsigned(srnd() % 3) : 3u;
             if (chaos && opt_.servo_chaos && opt_.servo_fault >= 0) f = unsigned(opt_.servo_fault);
-            if (f == 1 || f == 2) f = n_.sv_kills_in[SOAK_SV_SWITCH] < kCellKillsMax ? f : 0;
+            if (f == 2) f = n_.sv_kills_in[SOAK_SV_SWITCH] < kCellKillsMax ? f : 0;
             start_servo(f < 3 ? kServoFaults[f] : nullptr);
             if (f < 3) ++n_.sv_armed[f];
             ++n_.sv_restarts;

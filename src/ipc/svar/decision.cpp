@@ -5,6 +5,7 @@
 #include <cerrno>
 
 #include "ipc/svar/svar.hpp"
+#include "ipc/backplane/backplane.hpp"  // token_alive
 
 namespace chm::ipc::svar {
 
@@ -22,17 +23,47 @@ std::uint32_t word(std::uint32_t seq, std::uint32_t state) { return (seq & kSeqM
 Cell* cell_of(const Table& t, DecisionRef r) { return r.cell < kDecisionCells ? t.cell(r.cell) : nullptr; }
 }  // namespace
 
+namespace {
+
+bool open_free(Cell* c, std::uint32_t i, std::uint32_t owner, DecisionRef* out) {
+    std::uint32_t w = c->word.load(Acq);
+    if (state_of(w) != kCellFree) return false;
+    const std::uint32_t seq = (seq_of(w) + 1) & kSeqMask ? (seq_of(w) + 1) & kSeqMask : 1;
+    if (!c->word.compare_exchange_strong(w, word(seq, kCellOpen), AcqRel)) return false;
+    c->owner.store(owner, std::memory_order_release);
+    *out = DecisionRef{i, seq};
+    return true;
+}
+
+// A cell whose controller died before it gave the cell back. Still OPEN or
+// ABORTED, it is settled ABORTED and freed: its parties would abort it at
+// T themselves (nobody can commit it now), and a party that reads it
+// freed takes it for aborted too. One the controller had COMMITTED stays
+// taken: a party that has not reached T yet may not know the outcome, and
+// would read the freed cell as aborted while the others switched.
+bool reclaim_dead(const Table& t, Cell* c, std::uint32_t i) {
+    const std::uint32_t w = c->word.load(Acq);
+    const std::uint32_t st = state_of(w);
+    if (st != kCellOpen && st != kCellAborted) return false;
+    const std::uint32_t owner = c->owner.load(Acq);
+    if (owner == t.a->token || bp::token_alive(*t.a, owner, true)) return false;
+    const DecisionRef r{i, seq_of(w)};
+    if (decision_settle(t, r) != kCellAborted) return false;  // committed meanwhile, or reused
+    decision_free(t, r);
+    return true;
+}
+
+}  // namespace
+
 int decision_open(const Table& t, std::uint32_t owner, DecisionRef* out) {
-    for (std::uint32_t i = 0; i < kDecisionCells; ++i) {
-        Cell* c = t.cell(i);
-        std::uint32_t w = c->word.load(Acq);
-        if (state_of(w) != kCellFree) continue;
-        const std::uint32_t seq = (seq_of(w) + 1) & kSeqMask ? (seq_of(w) + 1) & kSeqMask : 1;
-        if (!c->word.compare_exchange_strong(w, word(seq, kCellOpen), AcqRel)) continue;
-        c->owner.store(owner, std::memory_order_release);
-        *out = DecisionRef{i, seq};
-        return 0;
-    }
+    for (std::uint32_t i = 0; i < kDecisionCells; ++i)
+        if (open_free(t.cell(i), i, owner, out)) return 0;
+    // Every cell taken: give back those of dead controllers, then retry.
+    bool freed = false;
+    for (std::uint32_t i = 0; i < kDecisionCells; ++i) freed |= reclaim_dead(t, t.cell(i), i);
+    if (freed)
+        for (std::uint32_t i = 0; i < kDecisionCells; ++i)
+            if (open_free(t.cell(i), i, owner, out)) return 0;
     return -EBUSY;
 }
 
