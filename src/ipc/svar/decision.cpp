@@ -45,6 +45,8 @@ bool reclaim_dead(const Table& t, Cell* c, std::uint32_t i) {
     const std::uint32_t w = c->word.load(Acq);
     const std::uint32_t st = state_of(w);
     if (st != kCellOpen && st != kCellAborted) return false;
+    // Owner 0: opened an instant ago, its token not stored yet (or never
+    // recorded): not a dead controller's (token_alive(0) is true).
     const std::uint32_t owner = c->owner.load(Acq);
     if (owner == t.a->token || bp::token_alive(*t.a, owner, true)) return false;
     const DecisionRef r{i, seq_of(w)};
@@ -93,6 +95,12 @@ void decision_free(const Table& t, DecisionRef r) {
     Cell* c = cell_of(t, r);
     if (!c) return;
     std::uint32_t w = c->word.load(Acq);
+    // Still this switch's and decided: nobody else can open or free it
+    // now, so its owner can be cleared first. A cell is then ownerless
+    // (token 0, never dead) from its freeing until its next opener stores
+    // its token just after the CAS that opened it: a reclaim in between
+    // (reclaim_dead) must not take that cell for a dead controller's.
+    if (seq_of(w) == r.seq && state_of(w) >= kCellCommitted) c->owner.store(0, std::memory_order_release);
     while (seq_of(w) == r.seq && state_of(w) >= kCellCommitted)  // an open switch is never freed
         if (c->word.compare_exchange_weak(w, word(r.seq, kCellFree), AcqRel)) return;
 }
