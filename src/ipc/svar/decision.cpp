@@ -21,10 +21,8 @@ std::uint32_t word(std::uint32_t seq, std::uint32_t state) { return (seq & kSeqM
 // The cell `r` names, if it is one of the table's (the reference may come
 // from a request or a table entry: neither is believed unchecked).
 Cell* cell_of(const Table& t, DecisionRef r) { return r.cell < kDecisionCells ? t.cell(r.cell) : nullptr; }
-}  // namespace
 
-namespace {
-
+// Open cell `c` (number `i`) for `owner` if it is FREE.
 bool open_free(Cell* c, std::uint32_t i, std::uint32_t owner, DecisionRef* out) {
     std::uint32_t w = c->word.load(Acq);
     if (state_of(w) != kCellFree) return false;
@@ -60,12 +58,9 @@ bool reclaim_dead(const Table& t, Cell* c, std::uint32_t i) {
 int decision_open(const Table& t, std::uint32_t owner, DecisionRef* out) {
     for (std::uint32_t i = 0; i < kDecisionCells; ++i)
         if (open_free(t.cell(i), i, owner, out)) return 0;
-    // Every cell taken: give back those of dead controllers, then retry.
-    bool freed = false;
-    for (std::uint32_t i = 0; i < kDecisionCells; ++i) freed |= reclaim_dead(t, t.cell(i), i);
-    if (freed)
-        for (std::uint32_t i = 0; i < kDecisionCells; ++i)
-            if (open_free(t.cell(i), i, owner, out)) return 0;
+    // Every cell taken: give back a dead controller's and take it.
+    for (std::uint32_t i = 0; i < kDecisionCells; ++i)
+        if (reclaim_dead(t, t.cell(i), i) && open_free(t.cell(i), i, owner, out)) return 0;
     return -EBUSY;
 }
 
