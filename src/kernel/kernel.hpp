@@ -210,6 +210,11 @@ struct Kernel {
     std::uint64_t vnow = 0;           // virtual clock
     std::uint64_t switched_in_at = 0; // CPU accounting of `current`
     std::uint64_t quantum_due = 0;    // end of `current`'s quantum, when armed
+    // The switch left the quantum's arming to the tick already armed at or
+    // before its end (core/dispatch.cpp, quantum_arm_at_switch_locked):
+    // the first event of the slice arms it; until then its end
+    // (slice_start + quantum) counts as expired and as due.
+    bool quantum_lazy = false;
     std::uint64_t slice_start = 0;    // when `current` was dispatched: its quanta end slice_start + k*q
     bool decision_owed = false;       // virtual clock: timers fired as a task's work ended
     std::uint64_t armed_at = 0;       // what the port timer is set to (0 none)

@@ -10,6 +10,7 @@
 #include <cstring>
 #include <string>
 #include <sys/resource.h>
+#include <sys/wait.h>
 #include <thread>
 #include <unistd.h>
 
@@ -141,10 +142,106 @@ TEST_F(RealTime, ForeignThreadNeverReceivesTheTimerSignal) {
     EXPECT_EQ(chm::port::stray_signal_count(), strays);
 }
 
+// Round robin on the real clock when the switches come far faster than
+// the quantum: two tasks yield to each other (a switch every few tens of
+// ns, whose quantum is left to the tick already armed), and a third equal
+// task never calls the kernel. Its quantum must still end it, again and
+// again: it sees the yielders move on between its looks. Bounded: it
+// gives up after 2 s of its own spinning (a kernel that never rotates it
+// fails with 0 rotations, it does not hang).
+volatile unsigned long g_yields = 0;
+volatile int g_rotations = 0;
+void yielder(void*) {
+    while (!g_stop) {
+        g_yields = g_yields + 1;
+        chm_task_yield();
+    }
+}
+void never_yields(void*) {
+    const uint64_t give_up = chm::port::now_ns() + 2000 * kMs;
+    unsigned long seen = g_yields;
+    while (g_rotations < 20 && chm::port::now_ns() < give_up) {
+        if (g_yields != seen) {
+            seen = g_yields;
+            g_rotations = g_rotations + 1;
+        }
+    }
+    g_stop = true;
+}
+
+TEST_F(RealTime, QuantumRotatesATaskThatNeverYieldsAmongTasksThatYieldAtEverySwitch) {
+    REQUIRE_PREEMPTION();
+    for (const chm_sched_policy p : {CHM_SCHED_FIXED, CHM_SCHED_MUF}) {
+        start(p, false, 1 * kMs);
+        g_stop = false;
+        g_yields = 0;
+        g_rotations = 0;
+        spawn(yielder, nullptr, "yield-a", 1);
+        spawn(yielder, nullptr, "yield-b", 1);
+        spawn(never_yields, nullptr, "spinner", 1);
+        ASSERT_EQ(chm_kernel_run(), 0);
+        chm_kernel_fini();
+        started_ = false;
+        EXPECT_EQ(g_rotations, 20) << "policy " << int(p) << ": the spinner's quantum ended "
+                                   << g_rotations << " times in 2 s";
+    }
+}
+
 double cpu_seconds() {
     rusage ru;
     getrusage(RUSAGE_SELF, &ru);
     return ru.ru_utime.tv_sec + ru.ru_stime.tv_sec + (ru.ru_utime.tv_usec + ru.ru_stime.tv_usec) * 1e-6;
+}
+
+// A kernel stopped by a task whose quantum was armed (or left to the armed
+// tick) keeps no tick for it: the process goes on (an RTPU's host server
+// runs its own shutdown after chm_kernel_run returns) and must not spin in
+// timer signals re-armed for a slice that ended. It did: at every tick the
+// stopped slice's end, long past, was armed again (chimera stop then
+// killed every RTPU after 5 s).
+volatile int g_stop_after = 0;
+void yield_then_stop(void*) {
+    for (int i = 0; i < g_stop_after; ++i) chm_task_yield();
+    chm_kernel_stop(0);
+}
+
+// In a child, bounded: a storm of timer signals leaves the child no time
+// to finish its sleep (it would hang the test, not fail it).
+TEST_F(RealTime, AStoppedKernelTakesNoTicksForTheSliceItStoppedIn) {
+    const pid_t child = fork();
+    ASSERT_GE(child, 0);
+    if (child == 0) {
+        chm_kernel_config_t cfg;
+        chm_kernel_config_init(&cfg);
+        cfg.quantum_ns = 1 * kMs;
+        if (chm_kernel_init(&cfg) != 0) _exit(3);
+        g_stop = false;
+        g_stop_after = 100000;
+        chm_task_attr_t a;
+        chm_task_attr_init(&a);
+        a.priority = 1;
+        chm_tid_t id;
+        if (chm_task_spawn(&id, yield_then_stop, nullptr, &a) || chm_task_spawn(&id, yielder, nullptr, &a)) _exit(3);
+        if (chm_kernel_run() != 0) _exit(4);
+        const double c0 = cpu_seconds();
+        const uint64_t t0 = chm::port::now_ns();
+        while (chm::port::now_ns() - t0 < 300 * kMs) usleep(10000);
+        const double share = (cpu_seconds() - c0) / ((chm::port::now_ns() - t0) * 1e-9);
+        std::fprintf(stderr, "CPU share after the stop: %.3f\n", share);
+        _exit(share < 0.25 ? 0 : 1);
+    }
+    int st = 0;
+    const uint64_t give_up = chm::port::now_ns() + 20000 * kMs;
+    pid_t r = 0;
+    while ((r = waitpid(child, &st, WNOHANG)) == 0 && chm::port::now_ns() < give_up) usleep(10000);
+    if (r == 0) {
+        kill(child, SIGKILL);
+        waitpid(child, &st, 0);
+        FAIL() << "the stopped kernel's process did not finish a 300 ms sleep in 20 s (timer signals "
+                  "without end)";
+    }
+    ASSERT_TRUE(WIFEXITED(st)) << st;
+    EXPECT_EQ(WEXITSTATUS(st), 0) << "1: the process spun in timer signals after the stop";
 }
 
 TEST_F(RealTime, IdleRtpuSleepsInsteadOfSpinning) {

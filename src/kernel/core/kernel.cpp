@@ -178,6 +178,8 @@ void chm_kernel_stop(int code) {
         cur->state = TaskState::Suspended;
         ++cur->suspend_count;
         g_k.current = nullptr;
+        g_k.quantum_due = 0;  // its slice ends here: no tick for it
+        g_k.quantum_lazy = false;
         port::Context* from = &cur->ctx;
         void* asan_save = nullptr;
         asan::switch_begin(&asan_save, nullptr, 0);

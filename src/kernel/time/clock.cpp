@@ -27,7 +27,14 @@ void timer_cancel_locked(TimerNode* n) {
 std::uint64_t next_due_locked() {
     std::uint64_t due = 0;
     if (g_k.timers.size()) due = g_k.timers.top_due();
+    if (!g_k.current) return due;  // a quantum is the running task's
     if (g_k.quantum_due && (!due || g_k.quantum_due < due)) due = g_k.quantum_due;
+    // A quantum left to the armed tick: a re-arm (only ever for an earlier
+    // event, or after that tick passed) must not drop its end.
+    if (g_k.quantum_lazy) {
+        const std::uint64_t end = g_k.slice_start + g_k.cfg.quantum_ns;
+        if (!due || end < due) due = end;
+    }
     return due;
 }
 
