@@ -76,6 +76,37 @@ def machine():
     }
 
 
+def cpu_times():
+    """Per-CPU jiffies from /proc/stat: {"cpu0": (busy+idle total, steal), ...}."""
+    out = {}
+    try:
+        for line in Path("/proc/stat").read_text().splitlines():
+            f = line.split()
+            if f and f[0].startswith("cpu") and f[0] != "cpu":
+                vals = [int(x) for x in f[1:]]
+                steal = vals[7] if len(vals) > 7 else 0
+                out[f[0]] = (sum(vals[:8]), steal)
+    except (OSError, ValueError):
+        pass
+    return out
+
+
+def host_share(before, after, load):
+    """What the host did beside the run: the hypervisor's steal per CPU (time
+    this VM wanted a CPU and another guest had it) and the load average at
+    the start (other work in this machine)."""
+    parts = []
+    for cpu in sorted(after, key=lambda c: int(c[3:])):
+        if cpu not in before:
+            continue
+        total = after[cpu][0] - before[cpu][0]
+        steal = after[cpu][1] - before[cpu][1]
+        if total > 0:
+            parts.append(f"{cpu} {100.0 * steal / total:.1f} %")
+    steal = "steal " + ", ".join(parts) if parts else "steal not readable"
+    return f"{steal} of the run's time (the hypervisor running others); load average at the start {load}"
+
+
 def human(v, unit, short=False):
     if v is None:
         return "–"
@@ -119,6 +150,7 @@ def markdown(rows, rest, info, commands, quick, elapsed):
                 f"* date: {info['date']}, commit `{info['commit']}`",
                 f"* mode: {'quick (few short runs: rough figures)' if quick else 'full'}; "
                 f"the run took {elapsed:.0f} s",
+                f"* host during the run: {info.get('host', 'not recorded')}",
                 f"* command: `{commands[0]}`",
                 f"* which ran: `{commands[1]}`", ""])
     chimera = [r for r in rows if not r["name"].startswith("peer_")]
@@ -560,9 +592,12 @@ def main():
             cmd.append("--quick")
         if args.filter:
             cmd += ["--filter", args.filter]
+        load = " ".join(Path("/proc/loadavg").read_text().split()[:3]) if Path("/proc/loadavg").exists() else "?"
+        stat0 = cpu_times()
         t0 = time.monotonic()
         rc = subprocess.call(cmd)  # its table goes straight to our stdout
         elapsed = time.monotonic() - t0
+        host = host_share(stat0, cpu_times(), load)
         if not rows_path.exists():
             sys.exit(f"run.py: chimera-bench exited with {rc} and wrote no rows")
         rows = json.loads(rows_path.read_text())
@@ -584,7 +619,9 @@ def main():
         if os.environ.get("MAKELEVEL"):  # started by the Makefile: say so first
             invoked = f"make bench{' QUICK=1' if args.quick else ''}`, i.e. `{invoked}"
         ran = " ".join(shlex.quote(c) for c in cmd).replace(tmp, "$TMP")
-        md = markdown(rows, rest, machine(), (invoked, ran), args.quick, elapsed)
+        info = machine()
+        info["host"] = host
+        md = markdown(rows, rest, info, (invoked, ran), args.quick, elapsed)
         md.extend(experiment_markdown(exps))
         md.extend(lateness_markdown(lateness))
         if made:
