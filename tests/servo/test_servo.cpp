@@ -243,7 +243,8 @@ TEST_F(Servo, EverySwitchedCycleHasExactlyOneWriter) {
     // A machine loaded by others may take longer than the bound: the
     // property is then judged on the switches done, if there are enough.
     if (done < switches) std::fprintf(stderr, "only %d of %d switches within the time bound\n", done, switches);
-    ASSERT_GE(done, std::min(switches, 100)) << "switches done in time";
+    ASSERT_GE(done, std::min(switches, 100)) << "switches done in time (" << refused_late << " refused for a late commit, "
+                                             << busy << " retried while a module finished)";
     chm_servo_module_t last = done % 2 ? c2 : c1;
     std::uint64_t end_at = 0;
     ASSERT_EQ(switch_until_done(&last, 1, nullptr, 0, &end_at), 0) << chm_servo_last_error();

@@ -176,4 +176,44 @@ TEST_F(Servo, DecisionCellsOfControllersThatDiedBeforeDecidingAreGivenBack) {
     EXPECT_EQ(chm_servo_kill(m), 0) << chm_servo_last_error();
 }
 
+// T passes while an RTPU arms its commit (held after its look at the
+// clock): the module's cycle task is spawned already released and, more
+// urgent than the server, runs at once, finds the switch undecided, aborts
+// it and withdraws the module. The commit's own bookkeeping must not undo
+// that afterwards: the module was left ON without a cycle task for good,
+// and every later switch of it refused ("not OFF"), seen once in CI.
+TEST_F(Servo, AModuleWhoseSwitchAbortsWhileItsCommitIsArmedEndsOff) {
+    ::setenv("CHIMERA_STOP_AT", "servo.commit.armed_late", 1);
+    const pid_t p3 = start_rtpu(3);
+    ::unsetenv("CHIMERA_STOP_AT");
+    ASSERT_TRUE(wait_serving(3, p3)) << read_file(err_of(3));
+    ASSERT_EQ(chm_servo_take(1u << 3), 0) << chm_servo_last_error();
+    CycleLog* log = make_log("c3");
+    chm_servo_module_t c3;
+    ASSERT_EQ(spawn(3, COUNTER_SO, "c3", 2 * kMs, &c3, {{"id", 4}}), 0) << chm_servo_last_error();
+    std::atomic<bool> held{false};
+    std::thread release([&] {
+        const std::uint64_t end = now_ms() + 20000;
+        while (!stopped(p3) && now_ms() < end) nap_ms(1);
+        held = stopped(p3);
+        nap_ms(100);  // T is a few ms after the prepare
+        kill(p3, SIGCONT);
+    });
+    const int r = chm_servo_on(c3);
+    const std::string why = chm_servo_last_error();
+    release.join();
+    ASSERT_TRUE(held) << "RTPU 3 never stopped at servo.commit.armed_late";
+    EXPECT_EQ(r, -ETIME) << why;
+    // The module goes (or already went) OFF; it ran no cycle.
+    for (int ms = 0; ms < 5000 && status(c3).state != CHM_SERVO_OFF; ++ms) nap_ms(1);
+    EXPECT_EQ(status(c3).state, CHM_SERVO_OFF) << "a module of an aborted switch stayed on";
+    EXPECT_EQ(log->count, 0u) << "a module of an aborted switch ran cycles";
+    // And it can be switched on again, and runs.
+    ASSERT_EQ(on_until_done(c3), 0) << chm_servo_last_error();
+    const std::uint64_t end = now_ms() + 5000;
+    while (status(c3).cycles < 5 && now_ms() < end) nap_ms(2);
+    EXPECT_GE(status(c3).cycles, 5u);
+    EXPECT_EQ(off_until_done(c3), 0) << chm_servo_last_error();
+}
+
 }  // namespace

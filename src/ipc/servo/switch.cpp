@@ -164,6 +164,9 @@ int commit(std::uint64_t at, svar::DecisionRef sw, const Item* items, std::uint3
             if (items[i].on) run_entry(items[i].m, kEntryOff);
         return r;
     }
+    // Where a test holds this RTPU after that look at the clock, until T
+    // has passed: the cycle tasks below are then spawned released.
+    CHM_STOP_POINT("servo.commit.armed_late");
     std::uint32_t armed = 0;
     for (; armed < count && r == 0; ++armed) {
         chm_module* m = items[armed].m;
@@ -172,15 +175,20 @@ int commit(std::uint64_t at, svar::DecisionRef sw, const Item* items, std::uint3
             std::snprintf(why, n, "%s", chm_bp_last_error());
             break;
         }
-        m->sw_arm.store(chm_module::kArmed);  // before its task can look
+        // All of it before the spawn: once T has passed, the task runs at
+        // once (more urgent than this server) and may withdraw the module
+        // (switch undecided at T), which must be the last word.
+        m->sw_arm.store(chm_module::kArmed);
+        m->on_at = at;
+        m->state.store(CHM_SERVO_ON);
         if ((r = spawn_cycle_task(m, grid_at_or_after(at, m->period_ns))) != 0) {
             m->sw_arm.store(chm_module::kNotArmed);
+            m->on_at = 0;
+            m->state.store(CHM_SERVO_OFF);
             (void)chm_svar_set_release(m->set);
             std::snprintf(why, n, "%s: cannot spawn its cycle task (%d)", m->name, r);
             break;
         }
-        m->on_at = at;
-        m->state.store(CHM_SERVO_ON);
     }
     if (r) {
         // Those armed lose their task; the failing one and those after it
