@@ -227,13 +227,21 @@ TEST_F(Servo, EverySwitchedCycleHasExactlyOneWriter) {
     int done = 0, refused_late = 0, busy = 0;
     std::uint64_t at = first_at;
     const std::uint64_t deadline = now_ms() + 480'000;
+    // One switch retried this long is stuck, not slow: a module left in a
+    // state no switch leaves (once ON without its cycle task for good).
+    constexpr std::uint64_t kStuckMs = 60'000;
+    std::uint64_t tried_since = now_ms();
     while (done < switches && now_ms() < deadline) {
         chm_servo_module_t from = done % 2 ? c2 : c1, to = done % 2 ? c1 : c2;
         const int r = chm_servo_switch(&from, 1, &to, 1, 0, &at);
         if (r == 0) {
             ++done;
+            tried_since = now_ms();
             continue;
         }
+        ASSERT_LT(now_ms() - tried_since, kStuckMs)
+            << "switch " << done << " still refused after " << kStuckMs / 1000 << " s: " << r << " "
+            << chm_servo_last_error() << "; c1 state " << status(c1).state << ", c2 state " << status(c2).state;
         if (std::getenv("CHM_SERVO_VERBOSE")) std::fprintf(stderr, "switch %d: %d %s\n", done, r, chm_servo_last_error());
         if (r == -ETIME) ++refused_late;
         else if (r == -EALREADY) ++busy;  // the last one off is still finishing its cycle

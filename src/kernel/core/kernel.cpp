@@ -134,7 +134,7 @@ int chm_kernel_init(const chm_kernel_config_t* cfg) {
     }
     if (int e = err_kernel_init()) return e;  // processor exceptions (err/fault.cpp)
     g_k.initialised = true;
-    g_tasks_exist = true;  // backplane calls now track tasks' holds (task/holds.hpp)
+    g_tasks_exist.store(true, std::memory_order_relaxed);  // backplane calls now track tasks' holds (task/holds.hpp)
     return 0;
 }
 

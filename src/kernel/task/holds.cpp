@@ -8,7 +8,7 @@
 
 namespace chm::kernel {
 
-bool g_tasks_exist = false;
+std::atomic<bool> g_tasks_exist{false};
 
 namespace {
 

@@ -21,14 +21,20 @@
 // an interrupt handler) all of this does nothing.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 
 namespace chm::kernel {
 
 // Set once a kernel was initialised in this process: before that no
 // thread is a task, and every call below is one load and a branch (a
-// host program's backplane calls pay nothing more).
-extern bool g_tasks_exist;
+// host program's backplane calls pay nothing more). Atomic, relaxed: the
+// backplane monitor thread (started at the join, before the kernel's init)
+// reads it in its recovery's lock calls while the main thread sets it; a
+// relaxed load is the same plain load.
+extern std::atomic<bool> g_tasks_exist;
+
+inline bool tasks_exist() { return g_tasks_exist.load(std::memory_order_relaxed); }
 
 bool hold_add_slow(void (*release)(void*, std::uint32_t), void* obj, std::uint32_t tag);
 void hold_drop_slow(void* obj);
@@ -40,20 +46,20 @@ void call_leave_slow();
 // before hold_drop(obj). False when not a task (nothing recorded) or the
 // list is full (Tcb::kMaxHolds; not released then).
 inline bool hold_add(void (*release)(void*, std::uint32_t), void* obj, std::uint32_t tag) {
-    return __builtin_expect(g_tasks_exist, 1) && hold_add_slow(release, obj, tag);
+    return __builtin_expect(tasks_exist(), 1) && hold_add_slow(release, obj, tag);
 }
 // The calling task gave `obj` back (newest matching entry); no-op when
 // it is not on the list.
 inline void hold_drop(void* obj) {
-    if (__builtin_expect(g_tasks_exist, 1)) hold_drop_slow(obj);
+    if (__builtin_expect(tasks_exist(), 1)) hold_drop_slow(obj);
 }
 
 // A backplane call begins and ends (CallScope).
 inline void call_enter() {
-    if (__builtin_expect(g_tasks_exist, 1)) call_enter_slow();
+    if (__builtin_expect(tasks_exist(), 1)) call_enter_slow();
 }
 inline void call_leave() {
-    if (__builtin_expect(g_tasks_exist, 1)) call_leave_slow();
+    if (__builtin_expect(tasks_exist(), 1)) call_leave_slow();
 }
 
 // True when the calling task's wait must end now: it was destroyed or its
