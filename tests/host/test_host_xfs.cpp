@@ -7,8 +7,10 @@
 #include <fstream>
 #include <string>
 
+#include <dirent.h>
 #include <sys/ioctl.h>
 #include <sys/stat.h>
+#include <sys/syscall.h>
 #include <sys/vfs.h>
 
 #include "chimera/host.h"
@@ -369,13 +371,37 @@ TEST_F(HostTest, TasksAreConfinedAndRunProgramsToo) {
     EXPECT_EQ(stat((root_ + "/from-task").c_str(), &st), 0);
 }
 
+// Is a thread of `pid` blocked opening a FIFO that has no writer? Its
+// wait channel says so (wait_for_partner), or, where the kernel does not
+// show wait channels, its system call (openat or openat2).
+bool blocked_in_fifo_open(pid_t pid) {
+    const std::string dir = "/proc/" + std::to_string(pid) + "/task";
+    DIR* d = opendir(dir.c_str());
+    if (!d) return false;
+    bool found = false;
+    while (dirent* e = readdir(d)) {
+        if (e->d_name[0] == '.') continue;
+        const std::string t = dir + "/" + e->d_name;
+        if (read_file(t + "/wchan").find("wait_for_partner") != std::string::npos) found = true;
+        const std::string sc = read_file(t + "/syscall");
+        const long nr = sc.empty() ? -1 : std::strtol(sc.c_str(), nullptr, 10);
+        if (read_file(t + "/wchan") == "0" && (nr == SYS_openat || nr == SYS_openat2)) found = true;
+    }
+    closedir(d);
+    return found;
+}
+
 // A worker stuck in the host's own call (the open of a FIFO nobody writes)
 // does not hold the host server's stop: it ends within its bound, and the
 // task waiting gets an error.
 TEST_F(HostTest, AStopIsNotHeldByAStuckHostCall) {
     ASSERT_EQ(mkfifo((root_ + "/nobody").c_str(), 0600), 0);
     ASSERT_NO_FATAL_FAILURE(probe({"block", "nobody"}));
-    nap_ms(200);  // the server's worker now waits in open()
+    // The server's worker waits in open(): seen, not assumed after a nap
+    // (under ThreadSanitizer 200 ms were once not enough to get there).
+    const std::uint64_t bound = now_ms() + 30000;
+    while (!blocked_in_fifo_open(server_) && now_ms() < bound) nap_ms(5);
+    ASSERT_TRUE(blocked_in_fifo_open(server_)) << "the host server never reached its open of the FIFO";
     ASSERT_EQ(kill(server_, SIGTERM), 0);
     const std::uint64_t end = now_ms() + 8000;
     int st = 0;
