@@ -196,7 +196,9 @@ TEST_F(Servo, AModuleWhoseSwitchAbortsWhileItsCommitIsArmedEndsOff) {
         const std::uint64_t end = now_ms() + 20000;
         while (!stopped(p3) && now_ms() < end) nap_ms(1);
         held = stopped(p3);
-        nap_ms(100);  // T is a few ms after the prepare
+        // T is max(2 ms, 4 x the prepares) after them: a second is past it
+        // unless a prepare took over 250 ms.
+        nap_ms(1000);
         kill(p3, SIGCONT);
     });
     const int r = chm_servo_on(c3);
