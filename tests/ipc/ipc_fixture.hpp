@@ -137,12 +137,16 @@ protected:
     void create(const chm_bp_config_t& c = small_config()) {
         ASSERT_EQ(chm_bp_create(path_.c_str(), &c), 0) << chm_bp_last_error();
     }
-    // Run fn in a child process; its return value is the exit status.
-    pid_t spawn(const std::function<int()>& fn) {
+    // Run fn in a child process; its return value is the exit status. A
+    // child that outlives `alarm_s` seconds is ended by SIGALRM (a child
+    // never outlives a hung test for long): a test whose children may
+    // rightly run longer under qemu on a loaded machine passes its own
+    // bound, as long as the one it reaps them with.
+    pid_t spawn(const std::function<int()>& fn, unsigned alarm_s = 60) {
         fflush(nullptr);
         const pid_t p = fork();
         if (p == 0) {
-            alarm(60);  // a child never outlives a hung test for long
+            alarm(alarm_s);
             _exit(fn());
         }
         EXPECT_GT(p, 0);

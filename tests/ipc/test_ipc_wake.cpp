@@ -82,12 +82,15 @@ TEST_F(Wake, HandOffsBetweenPollingRtpusSendNoSignals) {
         if (g_handoffs != kHandoffs) return 50;
         return signals < kHandoffs / 10 ? 0 : 51;
     };
-    const pid_t a = spawn([&] { return side(1, ping_side); });
-    const pid_t b = spawn([&] { return side(2, pong_side); });
-    // 2,000 hand-offs under qemu on a loaded machine took 47 s once: the
-    // bound is for a hang, not for speed.
-    EXPECT_EQ(reap(a, 600000), 0);  // 51: a signal for many hand-offs
-    EXPECT_EQ(reap(b, 600000), 0);
+    // 2,000 hand-offs under qemu on a loaded machine took 47 s once, and
+    // over 60 s once more (the children's default alarm ended both: exit
+    // -14, SIGALRM): the bound, the children's alarm and the reap alike,
+    // is for a hang, not for speed.
+    constexpr unsigned kBoundS = 600;
+    const pid_t a = spawn([&] { return side(1, ping_side); }, kBoundS);
+    const pid_t b = spawn([&] { return side(2, pong_side); }, kBoundS);
+    EXPECT_EQ(reap(a, kBoundS * 1000), 0);  // 51: a signal for many hand-offs
+    EXPECT_EQ(reap(b, kBoundS * 1000), 0);
 }
 
 // ---- a grant to a parked task: rung or watched
