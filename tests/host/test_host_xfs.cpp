@@ -392,10 +392,13 @@ bool blocked_in_fifo_open(pid_t pid) {
     while (dirent* e = readdir(d)) {
         if (e->d_name[0] == '.') continue;
         const std::string t = dir + "/" + e->d_name;
-        if (read_file(t + "/wchan").find("wait_for_partner") != std::string::npos) found = true;
-        const std::string sc = read_file(t + "/syscall");
-        const long nr = sc.empty() ? -1 : std::strtol(sc.c_str(), nullptr, 10);
-        if (read_file(t + "/wchan") == "0" && (nr == SYS_openat || nr == SYS_openat2)) found = true;
+        const std::string wchan = read_file(t + "/wchan");
+        if (wchan.find("wait_for_partner") != std::string::npos) found = true;
+        if (wchan == "0") {
+            const std::string sc = read_file(t + "/syscall");
+            const long nr = sc.empty() ? -1 : std::strtol(sc.c_str(), nullptr, 10);
+            if (nr == SYS_openat || nr == SYS_openat2) found = true;
+        }
     }
     closedir(d);
     return found;

@@ -105,6 +105,14 @@ protected:
     }
     static int on_until_done(chm_servo_module_t m) { return switch_until_done(nullptr, 0, &m, 1, nullptr); }
     static int off_until_done(chm_servo_module_t m) { return switch_until_done(&m, 1, nullptr, 0, nullptr); }
+    // Start RTPU n so that it stops itself (SIGSTOP) the first time it
+    // passes the named stop point (CHIMERA_STOP_AT).
+    pid_t start_rtpu_stopping_at(int n, const char* point) {
+        ::setenv("CHIMERA_STOP_AT", point, 1);
+        const pid_t p = start_rtpu(n);
+        ::unsetenv("CHIMERA_STOP_AT");
+        return p;
+    }
     static double get(const char* name) {
         double v = NAN;
         EXPECT_EQ(chm_svar_get(name, &v, sizeof v), 0);

@@ -35,6 +35,28 @@ bool stopped(pid_t p) {
     return k != std::string::npos && k + 2 < s.size() && s[k + 2] == 'T';
 }
 
+// Lets process p go on (SIGCONT) hold_ms after it stopped itself; join()
+// says whether it stopped within 20 s.
+class ContinueAfterHold {
+public:
+    ContinueAfterHold(pid_t p, int hold_ms)
+        : thread_([this, p, hold_ms] {
+              const std::uint64_t end = now_ms() + 20000;
+              while (!stopped(p) && now_ms() < end) nap_ms(1);
+              held_ = stopped(p);
+              nap_ms(hold_ms);
+              kill(p, SIGCONT);
+          }) {}
+    bool join() {
+        thread_.join();
+        return held_;
+    }
+
+private:
+    std::atomic<bool> held_{false};  // before thread_: set up before it runs
+    std::thread thread_;
+};
+
 // Every cycle index of [from, to) in the log, none twice.
 ::testing::AssertionResult ran_every_cycle(const CycleLog* log, std::uint64_t from, std::uint64_t to) {
     std::set<std::uint64_t> ks(log->k, log->k + std::min<std::uint32_t>(log->count, kLogMax));
@@ -46,9 +68,7 @@ bool stopped(pid_t p) {
 
 TEST_F(Servo, ASwitchOneRtpuCannotCommitInTimeSwitchesNothingAnywhere) {
     // RTPU 3 stops itself the first time it enters a commit.
-    ::setenv("CHIMERA_STOP_AT", "servo.commit.begin", 1);
-    const pid_t p3 = start_rtpu(3);
-    ::unsetenv("CHIMERA_STOP_AT");
+    const pid_t p3 = start_rtpu_stopping_at(3, "servo.commit.begin");
     ASSERT_TRUE(wait_serving(3, p3)) << read_file(err_of(3));
     ASSERT_EQ(chm_servo_take(1u << 3), 0) << chm_servo_last_error();
     declare("w", CHM_SVAR_DOUBLE);
@@ -71,21 +91,13 @@ TEST_F(Servo, ASwitchOneRtpuCannotCommitInTimeSwitchesNothingAnywhere) {
     ASSERT_EQ(switch_until_done(nullptr, 0, first_on, 2, &started), 0) << chm_servo_last_error();
 
     // Let RTPU 3 go on well after T: T is a few ms after the prepares.
-    std::atomic<bool> held{false};
-    std::thread release([&] {
-        const std::uint64_t end = now_ms() + 20000;
-        while (!stopped(p3) && now_ms() < end) nap_ms(1);
-        held = stopped(p3);
-        nap_ms(300);
-        kill(p3, SIGCONT);
-    });
+    ContinueAfterHold release(p3, 300);
     const chm_servo_module_t off[] = {c1, d1}, on[] = {c3, a1};
     const std::uint64_t called = now_ms();
     std::uint64_t at = 0;
     const int r = chm_servo_switch(off, 2, on, 2, 0, &at);
     const std::string why = chm_servo_last_error();
-    release.join();
-    ASSERT_TRUE(held) << "RTPU 3 never stopped at servo.commit.begin";
+    ASSERT_TRUE(release.join()) << "RTPU 3 never stopped at servo.commit.begin";
     EXPECT_EQ(r, -ETIME) << why;
     EXPECT_NE(why.find("nothing switched"), std::string::npos) << why;
     EXPECT_EQ(at, 0u) << "no instant is reported for a switch that did not happen";
@@ -183,28 +195,18 @@ TEST_F(Servo, DecisionCellsOfControllersThatDiedBeforeDecidingAreGivenBack) {
 // that afterwards: the module was left ON without a cycle task for good,
 // and every later switch of it refused ("not OFF"), seen once in CI.
 TEST_F(Servo, AModuleWhoseSwitchAbortsWhileItsCommitIsArmedEndsOff) {
-    ::setenv("CHIMERA_STOP_AT", "servo.commit.armed_late", 1);
-    const pid_t p3 = start_rtpu(3);
-    ::unsetenv("CHIMERA_STOP_AT");
+    const pid_t p3 = start_rtpu_stopping_at(3, "servo.commit.armed_late");
     ASSERT_TRUE(wait_serving(3, p3)) << read_file(err_of(3));
     ASSERT_EQ(chm_servo_take(1u << 3), 0) << chm_servo_last_error();
     CycleLog* log = make_log("c3");
     chm_servo_module_t c3;
     ASSERT_EQ(spawn(3, COUNTER_SO, "c3", 2 * kMs, &c3, {{"id", 4}}), 0) << chm_servo_last_error();
-    std::atomic<bool> held{false};
-    std::thread release([&] {
-        const std::uint64_t end = now_ms() + 20000;
-        while (!stopped(p3) && now_ms() < end) nap_ms(1);
-        held = stopped(p3);
-        // T is max(2 ms, 4 x the prepares) after them: a second is past it
-        // unless a prepare took over 250 ms.
-        nap_ms(1000);
-        kill(p3, SIGCONT);
-    });
+    // T is max(2 ms, 4 x the prepares) after them: a second is past it
+    // unless a prepare took over 250 ms.
+    ContinueAfterHold release(p3, 1000);
     const int r = chm_servo_on(c3);
     const std::string why = chm_servo_last_error();
-    release.join();
-    ASSERT_TRUE(held) << "RTPU 3 never stopped at servo.commit.armed_late";
+    ASSERT_TRUE(release.join()) << "RTPU 3 never stopped at servo.commit.armed_late";
     EXPECT_EQ(r, -ETIME) << why;
     // The module goes (or already went) OFF; it ran no cycle.
     for (int ms = 0; ms < 5000 && status(c3).state != CHM_SERVO_OFF; ++ms) nap_ms(1);
