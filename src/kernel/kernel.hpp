@@ -436,11 +436,14 @@ void task_free_stack_locked(Tcb* t);         // after the last switch away from 
 void task_start(void* tcb);
 void release_cycle_locked(Tcb* t, std::uint64_t release);
 int stacks_reserve(std::size_t size, unsigned char** lo);
-void stacks_release(unsigned char* lo, std::size_t size, std::size_t dirty);
+// Back to its pool (or unmapped). Its task's frames were scrubbed first
+// (stack_scrub), or it never ran.
+void stacks_release(unsigned char* lo, std::size_t size);
 bool stack_canary_ok(const Tcb* t);
 std::size_t stack_high_water(const Tcb* t);
 std::size_t stack_round(std::size_t size);
-std::size_t stack_dirty_estimate(const Tcb* t);
+// Re-zero the ended task's dirtied stack; returns its depth (bytes).
+std::size_t stack_scrub(const Tcb* t);
 
 // ---- scheduling policies (sched/*.cpp)
 int sched_select(chm_sched_policy policy, const chm_sched_ops_t* user, void* user_arg);

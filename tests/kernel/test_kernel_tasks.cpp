@@ -167,6 +167,48 @@ TEST_F(Tasks, FindByNameAndStatusSnapshot) {
     EXPECT_EQ(last & 0xffff, id & 0xffff) << "stale exactly when its slot was reused";
 }
 
+// A pooled stack goes to its next task scrubbed: that task's high water is
+// its own, not the deep one's that ran there before (stack.cpp re-zeroes
+// what a task dirtied as it releases the stack, and the high water reads
+// zero as "never touched"). The stack size is one only these tasks use.
+constexpr std::size_t kScrubStack = 48 * 1024;
+std::size_t g_shallow_high_water = 0;
+
+__attribute__((noinline)) void dirty_deep(std::size_t n) {
+    volatile unsigned char buf[32 * 1024];
+    for (std::size_t i = 0; i < n && i < sizeof buf; i += 64) buf[i] = 1;
+}
+std::size_t g_deep_high_water = 0;
+void deep_task(void*) { dirty_deep(32 * 1024); }
+void shallow_task(void*) {
+    chm_task_status_t st;
+    ASSERT_EQ(chm_task_status(chm_task_self(), &st), 0);
+    g_shallow_high_water = st.stack_high_water;
+}
+// Spawns the deep task (more urgent: it runs and ends at once), then the
+// shallow one, on a stack of the same size: the deep one's, back from the pool.
+void deep_then_shallow(void*) {
+    chm_task_attr_t a;
+    chm_task_attr_init(&a);
+    a.stack_size = kScrubStack;
+    a.priority = 5;
+    chm_tid_t deep, shallow;
+    ASSERT_EQ(chm_task_spawn(&deep, deep_task, nullptr, &a), 0);
+    chm_task_status_t st;
+    ASSERT_EQ(chm_task_status(deep, &st), 0);
+    g_deep_high_water = st.stack_high_water;
+    ASSERT_EQ(chm_task_spawn(&shallow, shallow_task, nullptr, &a), 0);
+}
+
+TEST_F(Tasks, APooledStackComesScrubbedToItsNextTask) {
+    start(CHM_SCHED_FIXED);
+    spawn(deep_then_shallow, nullptr, "driver", 1);
+    ASSERT_EQ(chm_kernel_run(), 0);
+    EXPECT_GE(g_deep_high_water, 32u * 1024) << "the deep task's own use is measured";
+    EXPECT_GT(g_shallow_high_water, 0u);
+    EXPECT_LT(g_shallow_high_water, 16u * 1024) << "the deep task's bytes were left on the reused stack";
+}
+
 // Slots are reused oldest-freed first: of two ended tasks, the one that
 // ended last stays readable longer.
 TEST_F(Tasks, EndedTasksStayReadableUntilTheirSlotIsReused) {

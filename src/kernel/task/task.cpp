@@ -86,6 +86,19 @@ int check_attr(const chm_task_attr_t& a, std::size_t* stack) {
     return 0;
 }
 
+// Zero-padded (status copies it whole); check_attr bounded its length.
+// The default name is one constant copy, not a strncpy call per spawn.
+void copy_name(char (&to)[CHM_TASK_NAME_MAX + 1], const char* name) {
+    static constexpr char kDefault[CHM_TASK_NAME_MAX + 1] = "task";
+    if (!name) {
+        std::memcpy(to, kDefault, sizeof to);
+        return;
+    }
+    const std::size_t n = strnlen(name, sizeof to - 1);
+    std::memcpy(to, name, n);
+    std::memset(to + n, 0, sizeof to - n);
+}
+
 }  // namespace
 
 Tcb* tcb_lookup(chm_tid_t id) {
@@ -165,8 +178,8 @@ void task_end_locked(Tcb* t) {
 
 void task_free_stack_locked(Tcb* t) {
     asan::stack_fresh(t->stack_lo, t->stack_size);  // its frames are gone: scanned and zeroed next
-    t->final_high_water = stack_dirty_estimate(t);
-    stacks_release(t->stack_lo, t->stack_size, t->final_high_water);
+    t->final_high_water = stack_scrub(t);
+    stacks_release(t->stack_lo, t->stack_size);
     t->stack_lo = nullptr;
     t->stack_gone = true;
     if (!t->joinable) slot_release_locked(t);  // a joinable task's waits for chm_task_join
@@ -199,14 +212,14 @@ int chm_task_spawn(chm_tid_t* out, void (*entry)(void*), void* arg, const chm_ta
     if (int e = stacks_reserve(stack, &lo)) return raise_or_return(e, "chm_task_spawn");
     Tcb* t = slot_take_locked();
     if (!t) {
-        stacks_release(lo, stack, 0);
+        stacks_release(lo, stack);
         return record_failure(-EAGAIN, "chm_task_spawn");
     }
     t->stack_lo = lo;
     t->stack_size = stack;
     t->entry = entry;
     t->arg = arg;
-    std::strncpy(t->name, a.name ? a.name : "task", sizeof t->name);  // zero-padded: status copies it whole
+    copy_name(t->name, a.name);
     t->s.id = tid_of(t);
     t->s.priority = a.priority;
     t->s.critical = a.critical;
@@ -222,7 +235,7 @@ int chm_task_spawn(chm_tid_t* out, void (*entry)(void*), void* arg, const chm_ta
     asan::stack_fresh(lo, stack);
     port::context_init(&t->ctx, lo, stack, task_start, t);
     if (int e = g_k.ops->admit(g_k.ops_self, &t->s)) {
-        stacks_release(lo, stack, 0);
+        stacks_release(lo, stack);
         slot_release_locked(t);
         return e < 0 ? e : -EAGAIN;
     }
