@@ -180,6 +180,7 @@ CHM_HOT __attribute__((noinline)) void switch_to_locked(Tcb* next, std::uint64_t
     void* asan_save = nullptr;
     asan::switch_begin(prev && prev == g_k.zombie ? nullptr : &asan_save,
                        next ? next->stack_lo : nullptr, next ? next->stack_size : 0);
+    port::steer_branch_history(next ? next->index : 0);
     port::context_switch_same_site(from, to);  // the kernel's only switch site
     asan::switch_end(asan_save);
     // Back in `prev`'s context.

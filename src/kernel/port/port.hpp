@@ -96,6 +96,14 @@ inline void call_indirect_return(void (*fn)()) { chm_port_call_indirect_return(f
 inline void call_indirect_return(void (*fn)()) { fn(); }
 #endif
 
+// Just before a switch to the task of slot `key`: make the branch history
+// tell incoming tasks apart, so the indirect jump that returns to the
+// incoming task's caller is predicted (x86_64/arch.hpp says why). A port
+// without it (CHM_PORT_HAS_STEER_BRANCH_HISTORY) does nothing.
+#if !defined(CHM_PORT_HAS_STEER_BRANCH_HISTORY)
+inline void steer_branch_history(std::uint32_t) {}
+#endif
+
 // ------------------------------------------------------- test-and-set lock
 
 // Atomically set the byte at `b` and report whether it was clear before:

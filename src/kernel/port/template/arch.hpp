@@ -46,6 +46,13 @@
 // test_port_preempt reports itself skipped.
 #define CHM_PORT_HAS_PREEMPTION 0
 
+// Optional, for speed only (port.hpp has a portable fallback for each):
+//   CHM_PORT_HAS_SWITCH_SAME_SITE     chm_port_switch_same_site (switch.S)
+//   CHM_PORT_HAS_CALL_INDIRECT_RETURN chm_port_call_indirect_return (switch.S)
+//   CHM_PORT_HAS_STEER_BRANCH_HISTORY steer_branch_history(key) here
+// Each is a branch-prediction aid measured on one processor (x86_64/); a
+// port takes them only with figures from its own.
+
 namespace chm::port {
 
 // Atomically set the byte at `b` and report whether it was clear before
