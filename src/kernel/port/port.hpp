@@ -89,11 +89,18 @@ inline void context_switch_same_site(Context* from, Context* to) { context_switc
 // that switches tasks, whose return address is the incoming task's caller
 // rather than the one the return predictor holds. A port without it
 // (CHM_PORT_HAS_CALL_INDIRECT_RETURN) simply calls fn.
+// The two-argument form returns fn's result.
+using IndirectEntry2 = int (*)(void*, std::uintptr_t);
 #if defined(CHM_PORT_HAS_CALL_INDIRECT_RETURN)
 extern "C" void chm_port_call_indirect_return(void (*fn)());
+extern "C" int chm_port_call2_indirect_return(IndirectEntry2 fn, void* a, std::uintptr_t b);
 inline void call_indirect_return(void (*fn)()) { chm_port_call_indirect_return(fn); }
+inline int call_indirect_return(IndirectEntry2 fn, void* a, std::uintptr_t b) {
+    return chm_port_call2_indirect_return(fn, a, b);
+}
 #else
 inline void call_indirect_return(void (*fn)()) { fn(); }
+inline int call_indirect_return(IndirectEntry2 fn, void* a, std::uintptr_t b) { return fn(a, b); }
 #endif
 
 // Just before a switch to the task of slot `key`: make the branch history

@@ -96,6 +96,30 @@ chm_port_call_indirect_return:
     .cfi_endproc
     .size   chm_port_call_indirect_return, .-chm_port_call_indirect_return
 
+/* int chm_port_call2_indirect_return(int (*fn)(void*, uintptr_t), void* a, uintptr_t b)
+ * The same for a kernel entry with two arguments and a result: calls
+ * fn(a, b) and returns its result (rax, untouched) through an indirect
+ * jump. */
+    .globl  chm_port_call2_indirect_return
+    .type   chm_port_call2_indirect_return, @function
+    .p2align 4
+chm_port_call2_indirect_return:
+    .cfi_startproc
+    subq    $8, %rsp
+    .cfi_adjust_cfa_offset 8
+    movq    %rdi, %rax
+    movq    %rsi, %rdi
+    movq    %rdx, %rsi
+    call    *%rax
+    addq    $8, %rsp
+    .cfi_adjust_cfa_offset -8
+    popq    %rcx
+    .cfi_adjust_cfa_offset -8
+    .cfi_register rip, rcx
+    jmp     *%rcx
+    .cfi_endproc
+    .size   chm_port_call2_indirect_return, .-chm_port_call2_indirect_return
+
 /* First instruction of every new context: context_init leaves entry in r12
  * and its argument in r13, and the stack 16-byte aligned here, so the call
  * below enters `entry` with rsp+8 aligned as the ABI wants. */
