@@ -7,6 +7,7 @@
 #include "err/err_internal.hpp"
 #include "core/fiber_asan.hpp"
 #include "kernel.hpp"
+#include "mem/mem_text.hpp"
 #include "task/holds.hpp"
 #include "kernel/mem/heap.hpp"
 #include "sync/remote_wait.hpp"
@@ -22,10 +23,14 @@ namespace {
 
 // The heap serves every thread; on the kernel thread its lock is also held
 // under the interrupt mask, so no task is ever preempted holding it.
-void heap_enter() {
+// The heap lock's hooks run inside a malloc that libc may have made with
+// its own locks held: in the allocator's section, whose code is never
+// preempted, and calling nothing out of it while the mask is free
+// (mem/mem_text.hpp).
+CHM_MEM_TEXT void heap_enter() {
     if (port::on_kernel_thread()) port::irq_disable();
 }
-void heap_leave() {
+CHM_MEM_TEXT void heap_leave() {
     // Never switch here: libc may have called malloc holding its own locks.
     if (port::on_kernel_thread()) port::irq_restore_no_switch();
 }

@@ -165,7 +165,9 @@ using PendingHook = void (*)(std::uint32_t why);
 void irq_set_pending_hook(PendingHook hook);
 void irq_take_pending();  // slow path of irq_restore; out of line
 
-inline void irq_disable() {
+// Always inlined: the allocator's lock hooks use it, and none of their
+// code may lie outside the allocator's section (mem/mem_text.hpp).
+__attribute__((always_inline)) inline void irq_disable() {
     g_irq.nest = g_irq.nest + 1;
     __atomic_signal_fence(__ATOMIC_SEQ_CST);
 }
@@ -180,12 +182,26 @@ inline void irq_restore() {
 
 inline bool irq_masked() { return g_irq.nest != 0; }
 
+// Mask held once (nest 1) and something pending: leave it to the timer,
+// which re-delivers it shortly (kPreemptRetryNs). Out of line; called
+// with the mask held, so not preemptible wherever its code lies.
+void irq_defer_pending_locked();
+
 // Release the mask without ever switching here: a tick that arrived while it
 // was held is re-delivered by the timer shortly instead (kPreemptRetryNs).
 // For code that may run below C library frames (the malloc family called by
 // libc itself, e.g. stdio allocating its buffer under the FILE lock): a
-// switch there would let another task into the same libc lock.
-void irq_restore_no_switch();
+// switch there would let another task into the same libc lock. Inline, and
+// the pending work done before the mask drops: after the last store only
+// the caller's own code runs (the allocator's hooks are in its section;
+// out of line, this function's return was preemptible code reached from a
+// malloc that libc made: lost stdio lines under qemu-aarch64, 4 of 30 runs
+// of CLibraryIsSafeUnderPreemption).
+__attribute__((always_inline)) inline void irq_restore_no_switch() {
+    if (g_irq.nest == 1 && g_irq.pending) irq_defer_pending_locked();
+    __atomic_signal_fence(__ATOMIC_SEQ_CST);
+    g_irq.nest = g_irq.nest - 1;
+}
 
 // ------------------------------------------------------------- the timer
 
@@ -226,7 +242,9 @@ int timer_signal();
 // True on the kernel thread: the thread that called timer_init, or that the
 // kernel named with set_kernel_thread (a virtual-clock kernel has no timer).
 // Any context.
-bool on_kernel_thread();
+extern constinit __attribute__((tls_model("initial-exec"))) thread_local bool t_kernel_thread;
+// Inline for the allocator's lock hooks (see irq_disable).
+__attribute__((always_inline)) inline bool on_kernel_thread() { return t_kernel_thread; }
 void set_kernel_thread(bool on);
 // The kernel thread's process and thread ids, the target of a directed
 // signal (a doorbell ring); tid 0 when no timer is live (virtual clock).

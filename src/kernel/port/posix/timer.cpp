@@ -15,6 +15,10 @@
 
 namespace chm::port {
 
+// initial-exec: no lazy TLS allocation inside the handler; read inline by
+// on_kernel_thread (port.hpp).
+constinit __attribute__((tls_model("initial-exec"))) thread_local bool t_kernel_thread = false;
+
 namespace {
 
 timer_t g_timer;
@@ -25,8 +29,6 @@ constexpr std::size_t kAltStackSize = 64 * 1024;
 // 32-bit: 64-bit atomics take a lock on m68k, never in a signal handler.
 std::uint32_t g_stray = 0;
 
-// initial-exec: no lazy TLS allocation inside the handler.
-__attribute__((tls_model("initial-exec"))) thread_local bool t_kernel_thread = false;
 
 std::uint32_t g_deferred = 0;
 unsigned g_defer_streak = 0;  // consecutive deferrals: backs the retry off
@@ -100,20 +102,14 @@ int g_kernel_tid = 0;
 
 int timer_signal() { return SIGRTMIN + 2; }
 
-bool on_kernel_thread() { return t_kernel_thread; }
 void set_kernel_thread(bool on) { t_kernel_thread = on; }
 int kernel_pid() { return getpid(); }
 int kernel_tid() { return g_kernel_tid; }
 
-void irq_restore_no_switch() {
-    __atomic_signal_fence(__ATOMIC_SEQ_CST);
-    const std::uint32_t n = g_irq.nest - 1;
-    g_irq.nest = n;
-    if (n == 0 && g_irq.pending) {
-        // A tick or a ring: the retry's tick dispatches either.
-        irq_take_pending_bits();
-        timer_arm_locked(now_ns() + kPreemptRetryNs);
-    }
+void irq_defer_pending_locked() {
+    // A tick or a ring: the retry's tick dispatches either.
+    irq_take_pending_bits();
+    timer_arm_locked(now_ns() + kPreemptRetryNs);
 }
 
 std::uint64_t deferred_preemption_count() { return g_deferred; }
