@@ -133,14 +133,23 @@ int p_slow_locked(Sem* m, Limit limit, std::uint64_t t) {
     return r;
 }
 
+// A P that finds a unit (count > 0) takes it.
+int take_unit_locked(Sem* m) {
+    --m->count;
+    return m->max == 1 ? took_binary_locked(m, g_k.current) : 0;
+}
+
+// A V of a binary semaphore: its holder gives it up (and a loan with it).
+void give_up_hold_locked(Sem* m) {
+    if (m->max != 1) return;
+    if ((m->flags & CHM_SEM_INHERIT) && m->holder) unlend_locked(m->holder);
+    hold_locked(m, nullptr);
+}
+
 int p_locked(chm_sem_t* s, Limit limit, std::uint64_t t) {
     Sem* m = as_sem(s);
     if (!m) return -EINVAL;
-    if (m->count) [[likely]] {
-        --m->count;
-        if (m->max == 1) return took_binary_locked(m, g_k.current);
-        return 0;
-    }
+    if (m->count) [[likely]] return take_unit_locked(m);
     if (limit == Limit::kTry || (limit == Limit::kRelative && t == CHM_NO_WAIT)) return -EAGAIN;
     return p_slow_locked(m, limit, t);
 }
@@ -178,24 +187,14 @@ __attribute__((noinline)) SemStep sem_step_locked(void* sem, std::uintptr_t op) 
     Sem* m = as_sem(static_cast<chm_sem_t*>(sem));
     Tcb* cur = g_k.current;
     SemStep st{m, 0, false, false};
+    // The callers kept the cases that cannot switch (mask held since): a
+    // V comes here with a waiter, a P with no unit left.
     if (!m) {
         st.r = -EINVAL;
     } else if (op == kOpV) {
-        if (m->max == 1) {
-            if ((m->flags & CHM_SEM_INHERIT) && m->holder) unlend_locked(m->holder);
-            hold_locked(m, nullptr);
-        }
-        if (Tcb* w = m->waiters.head) {
-            wake_locked(w, 0);  // hand the unit straight to the most urgent waiter
-            st.sched = cur && !g_k.in_irq;
-        } else if (m->count >= m->max) {
-            st.r = -EOVERFLOW;
-        } else {
-            ++m->count;
-        }
-    } else if (m->count) {
-        --m->count;
-        if (m->max == 1) st.r = took_binary_locked(m, cur);
+        give_up_hold_locked(m);
+        wake_locked(m->waiters.head, 0);  // hand the unit straight to the most urgent waiter
+        st.sched = cur && !g_k.in_irq;
     } else if (cur && !g_k.in_irq && !(m->flags & CHM_SEM_INHERIT)) {
         // p_slow_locked's block with no limit, no inheritance, not in an
         // interrupt handler (block_current_locked's refusal).
@@ -221,9 +220,7 @@ int sem_pv(void* sem, std::uintptr_t op) {
         else if (st.r == -EOWNERDEAD) hold_locked(st.m, cur);  // handed over by an aborted holder
     }
     if (st.sched) deliver_pending_locked();
-    // A V's -EOVERFLOW is returned, not raised (as chm_sem_v always did);
-    // the rest with the mask held, as before.
-    if (!(op == kOpV && st.r == -EOVERFLOW)) st.r = raise_or_return(st.r, op == kOpV ? "chm_sem_v" : "chm_sem_p");
+    st.r = raise_or_return(st.r, op == kOpV ? "chm_sem_v" : "chm_sem_p");  // with the mask held, as before
     port::irq_restore();
     return st.r;
 }
@@ -281,9 +278,7 @@ int chm_sem_p(chm_sem_t* s) {
     port::irq_disable();
     Sem* m = as_sem(s);
     if (m && m->count) [[likely]] {
-        --m->count;
-        int r = m->max == 1 ? took_binary_locked(m, g_k.current) : 0;
-        r = raise_or_return(r, "chm_sem_p");
+        const int r = raise_or_return(take_unit_locked(m), "chm_sem_p");
         port::irq_restore();
         return r;
     }
@@ -309,10 +304,7 @@ int chm_sem_v(chm_sem_t* s) {
     port::irq_disable();
     Sem* m = as_sem(s);
     if (m && !m->waiters.head) [[likely]] {
-        if (m->max == 1) {
-            if ((m->flags & CHM_SEM_INHERIT) && m->holder) unlend_locked(m->holder);
-            hold_locked(m, nullptr);
-        }
+        give_up_hold_locked(m);
         int r = 0;
         if (m->count >= m->max) r = -EOVERFLOW;  // returned, not raised
         else ++m->count;

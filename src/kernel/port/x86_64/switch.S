@@ -72,6 +72,21 @@ chm_port_switch_same_site:
     .cfi_endproc
     .size   chm_port_switch_same_site, .-chm_port_switch_same_site
 
+/* The body of both indirect-return entries below: call the function in
+ * `fn` (a register), then return to the entry's caller through an
+ * indirect jump, its result (rax) untouched. */
+.macro CALL_THEN_JUMP_BACK fn
+    subq    $8, %rsp
+    .cfi_adjust_cfa_offset 8
+    call    *\fn
+    addq    $8, %rsp
+    .cfi_adjust_cfa_offset -8
+    popq    %rcx
+    .cfi_adjust_cfa_offset -8
+    .cfi_register rip, rcx
+    jmp     *%rcx
+.endm
+
 /* void chm_port_call_indirect_return(void (*fn)(void))
  * Calls fn, then returns to our caller through an indirect jump, not `ret`.
  * For a kernel entry that switches tasks (chm_task_yield tail-calls this):
@@ -84,15 +99,7 @@ chm_port_switch_same_site:
     .p2align 4
 chm_port_call_indirect_return:
     .cfi_startproc
-    subq    $8, %rsp
-    .cfi_adjust_cfa_offset 8
-    call    *%rdi
-    addq    $8, %rsp
-    .cfi_adjust_cfa_offset -8
-    popq    %rcx
-    .cfi_adjust_cfa_offset -8
-    .cfi_register rip, rcx
-    jmp     *%rcx
+    CALL_THEN_JUMP_BACK %rdi
     .cfi_endproc
     .size   chm_port_call_indirect_return, .-chm_port_call_indirect_return
 
@@ -105,18 +112,10 @@ chm_port_call_indirect_return:
     .p2align 4
 chm_port_call2_indirect_return:
     .cfi_startproc
-    subq    $8, %rsp
-    .cfi_adjust_cfa_offset 8
     movq    %rdi, %rax
     movq    %rsi, %rdi
     movq    %rdx, %rsi
-    call    *%rax
-    addq    $8, %rsp
-    .cfi_adjust_cfa_offset -8
-    popq    %rcx
-    .cfi_adjust_cfa_offset -8
-    .cfi_register rip, rcx
-    jmp     *%rcx
+    CALL_THEN_JUMP_BACK %rax
     .cfi_endproc
     .size   chm_port_call2_indirect_return, .-chm_port_call2_indirect_return
 
