@@ -387,6 +387,11 @@ CodeRange allocator_code_range() {
             reinterpret_cast<std::uintptr_t>(__stop_chm_mem_text)};
 }
 
+CHM_MEM_TEXT void heap_lock_hooks(chm_heap_hook_fn* enter, chm_heap_hook_fn* leave) {
+    *enter = load_acquire(g_enter);
+    *leave = load_acquire(g_leave);
+}
+
 }  // namespace chm::mem
 
 extern "C" CHM_MEM_TEXT void chm_heap_set_lock_hooks(chm_heap_hook_fn enter, chm_heap_hook_fn leave) {

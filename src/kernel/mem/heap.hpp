@@ -95,3 +95,9 @@ extern "C" {
 typedef void (*chm_heap_hook_fn)(void);
 void chm_heap_set_lock_hooks(chm_heap_hook_fn enter, chm_heap_hook_fn leave);
 }
+
+namespace chm::mem {
+// The preemption hooks installed now (chm_heap_set_lock_hooks), for the
+// test that they lie in allocator_code_range() as the hooks' contract asks.
+void heap_lock_hooks(chm_heap_hook_fn* enter, chm_heap_hook_fn* leave);
+}  // namespace chm::mem

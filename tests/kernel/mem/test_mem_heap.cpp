@@ -16,6 +16,7 @@
 #include <thread>
 #include <vector>
 
+#include "chimera/kernel.h"
 #include "chimera/mem.h"
 #include "kernel/mem/heap.hpp"
 #include "mem_test_util.hpp"
@@ -203,6 +204,30 @@ TEST(Heap, AllocatorCodeIsOneRange) {
                            reinterpret_cast<const void*>(&chm_heap_set_lock_hooks)})
         EXPECT_TRUE(in_code_range(fn)) << fn;
     EXPECT_FALSE(in_code_range(reinterpret_cast<const void*>(&in_code_range)));
+}
+
+// The kernel's heap lock hooks run inside mallocs the C library makes
+// holding its own locks: they must be allocator code, never preempted
+// (mem_text.hpp). Out of the section, a tick at their last instructions
+// lost stdio lines under qemu-aarch64 (CLibraryIsSafeUnderPreemption, 9
+// runs in 60); this holds on every target whatever the timing.
+void not_a_hook() {}
+
+TEST(Heap, TheKernelsLockHooksAreAllocatorCode) {
+    chm_kernel_config_t c;
+    chm_kernel_config_init(&c);  // the real clock: the hooks are installed
+    ASSERT_EQ(chm_kernel_init(&c), 0);
+    chm_heap_hook_fn enter = nullptr, leave = nullptr;
+    heap_lock_hooks(&enter, &leave);
+    chm_kernel_fini();
+    ASSERT_NE(enter, nullptr);
+    ASSERT_NE(leave, nullptr);
+    EXPECT_TRUE(in_code_range(reinterpret_cast<const void*>(enter))) << "heap_enter outside chm_mem_text";
+    EXPECT_TRUE(in_code_range(reinterpret_cast<const void*>(leave))) << "heap_leave outside chm_mem_text";
+    chm_heap_hook_fn after_enter = &not_a_hook, after_leave = &not_a_hook;
+    heap_lock_hooks(&after_enter, &after_leave);
+    EXPECT_EQ(after_enter, nullptr) << "chm_kernel_fini leaves no hook behind";
+    EXPECT_EQ(after_leave, nullptr);
 }
 
 std::atomic<int> g_enters{0};
