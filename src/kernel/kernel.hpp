@@ -359,6 +359,16 @@ inline void charge_current_locked(std::uint64_t now) {
     cur->s.cycle_cpu_ns += d;
     g_k.switched_in_at = now;
 }
+// The reading a switch runs at: the clock only when something needs it
+// (per-switch CPU accounting or a round-robin quantum: a clock read costs
+// more than the rest of a switch on a virtual machine), the running task
+// charged up to it.
+inline std::uint64_t schedule_now_locked() {
+    const bool timed = g_k.cfg.cpu_accounting || g_k.cfg.quantum_ns;
+    const std::uint64_t now = timed ? now_locked() : now_cached_locked();
+    if (g_k.cfg.cpu_accounting) charge_current_locked(now);
+    return now;
+}
 
 // ---- interrupts (irq/irq.cpp)
 // Deliver every raised, enabled vector to its handler. Mask held; kernel
@@ -412,6 +422,15 @@ void task_end_locked(Tcb* t);         // unlink everywhere, mark ended
 // End the running task with `reason` and `status`: its hooks first (task
 // context, mask free), then the end proper. Does not return.
 [[noreturn]] void task_end_current(chm_task_end_reason reason, int status);
+// The switch of a spawn (op kSwitchSpawn: the spawner, charged up to the
+// spawn's clock reading, lets a more urgent new task run) and of a task's
+// end (kSwitchEnd: the running task `tcb` ends and never comes back): one
+// path to the scheduler for both, so a spawner resumed by its child's end
+// returns through the very call sites the child switched from (task.cpp).
+// Entered with the mask held through port::call_indirect_return; releases
+// it; returns 0.
+enum : std::uintptr_t { kSwitchSpawn = 0, kSwitchEnd = 1 };
+int task_switch_entry(void* tcb, std::uintptr_t op);
 // Give back everything `t` holds in backplane calls (its hold list, last
 // first), in the caller's context, mask free: the end of every task.
 void task_release_holds(Tcb* t);

@@ -232,16 +232,6 @@ inline __attribute__((always_inline)) void decide_builtin_locked(Tcb* cur, Tcb* 
 
 }  // namespace
 
-// Read the clock only when something needs it: per-switch CPU accounting
-// or a round-robin quantum (a clock read costs more than the rest of a
-// switch on a virtual machine).
-inline std::uint64_t schedule_now_locked() {
-    const bool timed = g_k.cfg.cpu_accounting || g_k.cfg.quantum_ns;
-    const std::uint64_t now = timed ? now_locked() : now_cached_locked();
-    if (g_k.cfg.cpu_accounting) charge_current_locked(now);
-    return now;
-}
-
 void schedule_locked() { schedule_at_locked(schedule_now_locked()); }
 
 CHM_HOT void schedule_at_locked(std::uint64_t now) {

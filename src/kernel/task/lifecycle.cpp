@@ -81,12 +81,7 @@ void task_run_end_hooks(Tcb* t) {
     port::irq_disable();
     cur->end_reason = std::uint8_t(reason);
     cur->exit_status = status;
-    task_end_locked(cur);
-    if (g_k.zombie) {  // not yet reaped (we ran without returning from a switch)
-        task_free_stack_locked(g_k.zombie);
-    }
-    g_k.zombie = cur;
-    schedule_locked();
+    (void)port::call_indirect_return(task_switch_entry, cur, kSwitchEnd);  // never returns
     __builtin_unreachable();
 }
 

@@ -143,6 +143,34 @@ void task_start(void* p) {
     task_end_current(CHM_TASK_RETURNED, 0);
 }
 
+namespace {
+
+// Everything of task_switch_entry before the scheduler, and the clock
+// reading it runs at. Not inlined: its result is opaque to the entry, so
+// the scheduler keeps one call site there.
+__attribute__((noinline)) std::uint64_t switch_step_locked(void* tcb, std::uintptr_t op) {
+    if (op == kSwitchSpawn) {
+        // The spawn's own reading (now_locked, moments ago) is the switch's.
+        const std::uint64_t now = now_cached_locked();
+        if (g_k.cfg.cpu_accounting) charge_current_locked(now);
+        return now;
+    }
+    Tcb* cur = static_cast<Tcb*>(tcb);
+    task_end_locked(cur);
+    if (g_k.zombie) task_free_stack_locked(g_k.zombie);  // not yet reaped (we ran without returning from a switch)
+    g_k.zombie = cur;
+    return schedule_now_locked();
+}
+
+}  // namespace
+
+CHM_HOT int task_switch_entry(void* tcb, std::uintptr_t op) {
+    schedule_at_locked(switch_step_locked(tcb, op));
+    deliver_pending_locked();  // the spawner's, once it runs again
+    port::irq_restore();
+    return 0;
+}
+
 CHM_HOT void release_cycle_locked(Tcb* t, std::uint64_t release) {
     task_apply_timing_locked(t);  // chm_task_set_timing takes effect here
     // Counted here, not when the task returns from its wait: a deadline
@@ -196,16 +224,14 @@ void chm_task_attr_init(chm_task_attr_t* a) {
     if (a) *a = chm_task_attr_t{};
 }
 
-int chm_task_spawn(chm_tid_t* out, void (*entry)(void*), void* arg, const chm_task_attr_t* attr) {
-    if (!g_k.initialised) return raise_or_return(-EPERM, "chm_task_spawn");
-    if (!entry) return raise_or_return(-EINVAL, "chm_task_spawn");
-    chm_task_attr_t a{};
-    if (attr) a = *attr;
-    std::size_t stack;
-    if (int e = check_attr(a, &stack)) return raise_or_return(e, "chm_task_spawn");
-    stack = stack_round(stack);
+}  // extern "C"
 
-    IrqGuard guard;
+namespace {
+
+// The spawn proper, mask held: 0 and the new task in *made, or the error
+// (raised or returned as chm_task_spawn's).
+int spawn_locked(chm_tid_t* out, void (*entry)(void*), void* arg, const chm_task_attr_t& a, std::size_t stack,
+                 Tcb** made) {
     if (!tcbs_reserved() || !sched_reserve(g_k.alive + 1) || !g_k.timers.reserve(2 * (g_k.alive + 1)))
         return raise_or_return(-ENOMEM, "chm_task_spawn");
     unsigned char* lo;
@@ -240,7 +266,7 @@ int chm_task_spawn(chm_tid_t* out, void (*entry)(void*), void* arg, const chm_ta
         return e < 0 ? e : -EAGAIN;
     }
     ++g_k.alive;
-    const std::uint64_t now = now_locked();
+    const std::uint64_t now = now_locked();  // the switch below runs at this reading too
     if (a.period_ns) {
         const std::uint64_t first = a.start_ns ? a.start_ns : now;
         if (first > now) {
@@ -256,8 +282,34 @@ int chm_task_spawn(chm_tid_t* out, void (*entry)(void*), void* arg, const chm_ta
         make_ready_locked(t);
     }
     if (out) *out = tid_of(t);
-    reschedule_at_locked(now);  // the new task may be more urgent than its parent
+    *made = t;
     return 0;
+}
+
+}  // namespace
+
+extern "C" {
+
+int chm_task_spawn(chm_tid_t* out, void (*entry)(void*), void* arg, const chm_task_attr_t* attr) {
+    if (!g_k.initialised) return raise_or_return(-EPERM, "chm_task_spawn");
+    if (!entry) return raise_or_return(-EINVAL, "chm_task_spawn");
+    chm_task_attr_t a{};
+    if (attr) a = *attr;
+    std::size_t stack;
+    if (int e = check_attr(a, &stack)) return raise_or_return(e, "chm_task_spawn");
+    stack = stack_round(stack);
+
+    port::irq_disable();
+    Tcb* t = nullptr;
+    const int e = spawn_locked(out, entry, arg, a, stack, &t);
+    // The new task may be more urgent than its parent: from a task, the
+    // switch goes through task_switch_entry (which releases the mask).
+    if (e || !g_k.current || g_k.in_irq) {
+        if (!e) reschedule_at_locked(now_cached_locked());  // not from a task: no switch here
+        port::irq_restore();
+        return e;
+    }
+    return port::call_indirect_return(task_switch_entry, t, kSwitchSpawn);
 }
 
 void chm_task_exit(void) {
