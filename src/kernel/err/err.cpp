@@ -224,7 +224,7 @@ void err_abort_current() {
 }
 
 void err_task_ended_locked(Tcb* t) {
-    sem_release_held_locked(t, t->end_reason == CHM_TASK_ABORTED);
+    if (t->held) sem_release_held_locked(t, t->end_reason == CHM_TASK_ABORTED);
     if (t->stack_lo && !stack_canary_ok(t)) {
         chm_err_info_t info{};
         info.module = CHM_ERR_KERNEL;

@@ -42,6 +42,8 @@ TaskExt* ext_locked(Tcb* t) {
 }  // namespace
 
 void task_run_end_hooks(Tcb* t) {
+    // Most tasks hold nothing and registered nothing: no mask taken then.
+    if (!t->nholds && !t->ext) return;
     task_release_holds(t);  // backplane locks and records first: others wait on them
     // Each hook is taken off the list before it runs: one that faults or
     // ends the task some other way is not run twice, and the rest still run
