@@ -214,9 +214,13 @@ typedef struct chm_task_status {
 
 /* Snapshot of a task. A task that ended stays readable (state
  * CHM_TASK_ENDED, its final counters; stack_high_water as measured when its
- * stack was released) until its slot is taken by a new task: slots are
- * reused oldest-freed first, so at least until as many tasks have been
- * spawned as there were free slots when it ended.
+ * stack was released) until its slot is taken by a new task. Of the free
+ * slots, in the order they were freed, a spawn takes the 65th most recently
+ * freed when more than 64 are free, else the least recently freed: a slot
+ * is not taken while 64 slots freed after it are free, nor before every
+ * slot freed before it. (Tasks spawned and ended in turn thus reuse a few
+ * TCBs, kept in the cache, even after a burst of thousands of tasks.) A
+ * joinable task's status is kept until chm_task_join.
  * Errors: -ESRCH unknown task (or ended and its slot reused), -EINVAL NULL. */
 CHM_CHECK int chm_task_status(chm_tid_t task, chm_task_status_t* out);
 

@@ -164,6 +164,9 @@ struct Tcb {
 };
 
 inline constexpr std::uint32_t kMaxTasks = 32768;
+// An ended task's slot is not taken again while this many slots freed
+// after it are free (task/task.cpp: slot_release_locked).
+inline constexpr std::uint32_t kSlotRetain = 64;
 
 // Timers due at the same instant fire in task-index order (spawn order in
 // a fresh kernel): simultaneous releases arrive in a defined order, which
@@ -225,8 +228,13 @@ struct Kernel {
     Tcb* tcbs = nullptr;
     std::uint32_t tcb_hw = 0;       // slots ever used
     std::uint32_t alive = 0;
-    std::int32_t free_slot = -1;    // recycled slots, oldest first, linked through Tcb::next_free
-    std::int32_t free_tail = -1;    // the newest recycled slot
+    // Free slots (task/task.cpp, slot_release_locked): the last
+    // kSlotRetain freed, oldest first, then the ones freed before them,
+    // newest first; both linked through Tcb::next_free.
+    std::int32_t free_slot = -1;    // the oldest of the recently freed
+    std::int32_t free_tail = -1;    // the newest of them
+    std::uint32_t free_recent = 0;  // how many (at most kSlotRetain)
+    std::int32_t cold_slot = -1;    // freed before them: a stack, newest on top
     std::uint32_t slots_retired = 0;  // slots whose generations are all used (kGenMax)
 
     // Tasks parked in blocking UNIX calls (io/fdwait.cpp): the idle loop

@@ -209,8 +209,9 @@ TEST_F(Tasks, APooledStackComesScrubbedToItsNextTask) {
     EXPECT_LT(g_shallow_high_water, 16u * 1024) << "the deep task's bytes were left on the reused stack";
 }
 
-// Slots are reused oldest-freed first: of two ended tasks, the one that
-// ended last stays readable longer.
+// With few slots free, the least recently freed is taken first
+// (test_kernel_slots.cpp has the whole rule): of two ended tasks, the one
+// that ended last stays readable longer.
 TEST_F(Tasks, EndedTasksStayReadableUntilTheirSlotIsReused) {
     start(CHM_SCHED_MUF);
     chm_tid_t a = spawn(nop_task, nullptr, "a"), b = spawn(nop_task, nullptr, "b");
@@ -235,9 +236,9 @@ void spawns_into_the_freed_slot(void*) {
     chm_task_attr_init(&a);
     a.name = "b";
     a.priority = 0;  // below us: it runs once we end, with signal 3 pending
-    // Slots are reused oldest-freed first: older free slots go by (each
-    // spawned and destroyed, back to the free list's tail) until the first
-    // task's slot comes up.
+    // Other free slots go by (each spawned and destroyed, freed again)
+    // until the first task's slot comes up (test_kernel_slots.cpp has the
+    // order).
     for (int i = 0; i < 40000; ++i) {
         ASSERT_EQ(chm_task_spawn(&g_second, quiet, nullptr, &a), 0);
         if ((g_second & 0xffff) == (g_first & 0xffff)) break;
@@ -286,7 +287,7 @@ TEST_F(Tasks, ARecycledSlotStartsWithACleanSchedulerView) {
     const chm_tid_t first = spawn(quiet, nullptr, "first", 1);
     ASSERT_EQ(chm_task_destroy(first), 0);
     chm_tid_t id = CHM_TID_NONE;
-    for (int i = 0; i < 40000; ++i) {  // oldest-freed first: until its slot comes up
+    for (int i = 0; i < 40000; ++i) {  // until its slot comes up
         id = spawn(quiet, nullptr, "next", 1);
         if ((id & 0xffff) == (first & 0xffff)) break;
         ASSERT_EQ(chm_task_destroy(id), 0);
