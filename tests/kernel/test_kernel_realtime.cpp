@@ -244,6 +244,46 @@ TEST_F(RealTime, AStoppedKernelTakesNoTicksForTheSliceItStoppedIn) {
     EXPECT_EQ(WEXITSTATUS(st), 0) << "1: the process spun in timer signals after the stop";
 }
 
+// Periodic tasks released in turn on a regular grid (4 tasks of period
+// 2 ms, 500 us apart) need no timer re-arm per release: the timer repeats
+// at the gap to the heap's next event (time/clock.cpp,
+// next_gap_guess_locked). Guessing from the top event's own task alone
+// (2 ms) re-armed at every release: a system call each, and on a virtual
+// machine a timer reprogramming too. Judged only when the ticks came on
+// time: a late tick makes the next event stale, and re-arming is right.
+std::atomic<int> g_late{0}, g_released{0};
+void grid_task(void*) {
+    for (int i = 0; i < 50; ++i) {
+        if (chm_time_now() - chm_task_cycle_release() > 250 * kUs) ++g_late;
+        ++g_released;
+        ASSERT_EQ(chm_task_wait_period(), 0);
+    }
+}
+
+TEST_F(RealTime, TasksReleasedInTurnOnAGridNeedNoTimerRearmPerRelease) {
+    start(CHM_SCHED_FIXED, false, 0);
+    g_late = 0;
+    g_released = 0;
+    const std::uint64_t t0 = chm_time_now() + 20 * kMs;
+    for (int k = 0; k < 4; ++k) {
+        chm_task_attr_t a;
+        chm_task_attr_init(&a);
+        a.name = "grid";
+        a.priority = 1 + k;
+        a.period_ns = 2 * kMs;
+        a.start_ns = t0 + std::uint64_t(k) * 500 * kUs;
+        chm_tid_t id;
+        ASSERT_EQ(chm_task_spawn(&id, grid_task, nullptr, &a), 0);
+    }
+    const std::uint64_t arms0 = chm::port::timer_arm_count();
+    ASSERT_EQ(chm_kernel_run(), 0);
+    const std::uint64_t arms = chm::port::timer_arm_count() - arms0;
+    ASSERT_EQ(g_released.load(), 200);
+    if (g_late > 20) GTEST_SKIP() << g_late << " of 200 releases came over 250 us late: too slow to judge";
+    EXPECT_LT(arms, 50u) << "timer re-arms for 200 releases";
+    std::printf("%llu timer arms for 200 releases, %d late\n", (unsigned long long)arms, g_late.load());
+}
+
 TEST_F(RealTime, IdleRtpuSleepsInsteadOfSpinning) {
     start(CHM_SCHED_MUF, false);
     spawn(tick_task, nullptr, "ticker", 1, 10 * kMs);  // 100 cycles: 1 s

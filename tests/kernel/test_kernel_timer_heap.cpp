@@ -81,6 +81,24 @@ void run_sequence(std::uint64_t seed, int ops, std::size_t nodes, std::uint64_t 
         } else {
             ASSERT_EQ(heap.top(), nullptr);
         }
+        {  // the earliest due after a random instant, as the timer's interval guess asks
+            const std::uint64_t after = rng() % due_range;
+            std::uint64_t want = 0;
+            std::size_t by_then = 0;  // events due at or before `after`
+            for (const auto& e : m.s) {
+                if (std::get<0>(e) > after) {
+                    want = std::get<0>(e);
+                    break;
+                }
+                ++by_then;
+            }
+            const std::uint64_t got = heap.next_due_after(after);
+            // 0 with an answer only when the events due by then (and their
+            // children) outrun the look's budget.
+            if (got || by_then * TimerHeap::kArity < TimerHeap::kLookBudget) {
+                ASSERT_EQ(got, want) << "seed " << seed << " op " << op << " after " << after;
+            }
+        }
         if (op % 64 == 0) {  // every node: armed exactly when the model has it
             for (std::size_t k = 0; k < nodes; ++k)
                 ASSERT_EQ(node[k].idx >= 0, m.s.count(key(k)) == 1) << "seed " << seed << " op " << op << " node " << k;

@@ -71,6 +71,28 @@ public:
         data_ = nullptr;
         size_ = cap_ = 0;
     }
+    // The earliest due later than `after`, or 0 when there is none or it
+    // takes more than kLookBudget steps to tell (an event due at or before
+    // `after` is visited with its children: a subtree holding the root).
+    static constexpr std::size_t kLookBudget = 256;
+    std::uint64_t next_due_after(std::uint64_t after) const {
+        std::uint32_t todo[kLookBudget];
+        std::size_t head = 0, tail = 0;
+        std::uint64_t best = 0;
+        if (size_) todo[tail++] = 0;
+        while (head < tail) {
+            const std::size_t i = todo[head++];
+            if (data_[i].due > after) {
+                if (!best || data_[i].due < best) best = data_[i].due;
+                continue;
+            }
+            for (std::size_t c = kArity * i + 1; c < size_ && c <= kArity * i + kArity; ++c) {
+                if (tail == kLookBudget) return 0;
+                todo[tail++] = std::uint32_t(c);
+            }
+        }
+        return best;
+    }
     TimerNode* top() const { return size_ ? data_[0].node : nullptr; }
     std::uint64_t top_due() const { return data_[0].due; }  // size() > 0
     std::size_t size() const { return size_; }
