@@ -74,7 +74,7 @@ public:
     // The earliest due later than `after`, or 0 when there is none or it
     // takes more than kLookBudget steps to tell (an event due at or before
     // `after` is visited with its children: a subtree holding the root).
-    static constexpr std::size_t kLookBudget = 256;
+    static constexpr std::size_t kLookBudget = 64;  // its queue: 256 bytes of a task's stack
     std::uint64_t next_due_after(std::uint64_t after) const {
         std::uint32_t todo[kLookBudget];
         std::size_t head = 0, tail = 0;
