@@ -252,6 +252,8 @@ TEST_F(RealTime, AStoppedKernelTakesNoTicksForTheSliceItStoppedIn) {
 // machine a timer reprogramming too. Judged only when the ticks came on
 // time: a late tick makes the next event stale, and re-arming is right.
 std::atomic<int> g_late{0}, g_released{0};
+// A deadline missed on a slow machine is counted late, not an error signal.
+chm_deadline_action keep_going(const chm_deadline_info_t*, void*) { return CHM_DL_CONTINUE; }
 void grid_task(void*) {
     for (int i = 0; i < 50; ++i) {
         if (chm_time_now() - chm_task_cycle_release() > 250 * kUs) ++g_late;
@@ -272,6 +274,7 @@ TEST_F(RealTime, TasksReleasedInTurnOnAGridNeedNoTimerRearmPerRelease) {
         a.priority = 1 + k;
         a.period_ns = 2 * kMs;
         a.start_ns = t0 + std::uint64_t(k) * 500 * kUs;
+        a.on_deadline = keep_going;
         chm_tid_t id;
         ASSERT_EQ(chm_task_spawn(&id, grid_task, nullptr, &a), 0);
     }
