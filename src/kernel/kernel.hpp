@@ -280,7 +280,12 @@ inline std::uint64_t now_cached_locked() {
     return g_k.cfg.virtual_clock ? g_k.vnow : g_k.now_cache;
 }
 void timer_add_locked(TimerNode* n, std::uint64_t due);
-void timer_cancel_locked(TimerNode* n);
+void timer_remove_locked(TimerNode* n);  // an armed timer out of the heap
+// Disarm `n` if it is armed (the check inline: most cancels find nothing).
+inline void timer_cancel_locked(TimerNode* n) {
+    CHM_ASSERT_LOCKED();
+    if (n->idx >= 0) timer_remove_locked(n);
+}
 // Fire every due timer; returns true when the running task must reschedule.
 bool timers_run_locked(std::uint64_t now);
 // Program the port timer for the earliest of the timer heap and quantum.
@@ -322,8 +327,11 @@ void deliver_deadline_miss_locked(Tcb* cur);
 // Make `t` ready (not for the running task). A task that becomes ready goes
 // behind its equals; a preempted one keeps its place (keep_place).
 void make_ready_locked(Tcb* t, bool keep_place = false);
-// Remove `t` from the ready set if it is there.
-void unready_locked(Tcb* t);
+// Remove `t` from the ready set if it is there (the check inline).
+void unready_queued_locked(Tcb* t);  // `t` is in it
+inline void unready_locked(Tcb* t) {
+    if (t->in_ready) unready_queued_locked(t);
+}
 // Run the most urgent task: switch if it is not the current one (or the
 // current one stopped running). Task or kernel context, mask held.
 void schedule_locked();
@@ -502,7 +510,11 @@ bool sched_reserve(std::size_t tasks);
 
 // ---- wait queues (sync/waitq.cpp)
 void waitq_insert_locked(WaitQueue* q, Tcb* t);
-void waitq_remove_locked(Tcb* t);
+void waitq_unlink_locked(Tcb* t);  // `t` waits in a queue
+// Take `t` out of the queue it waits in, if any (the check inline).
+inline void waitq_remove_locked(Tcb* t) {
+    if (t->wq) waitq_unlink_locked(t);
+}
 // Wake `t` from whatever it waits on with `result`.
 void wake_locked(Tcb* t, int result);
 

@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <cstdint>
+#include <cstdlib>
 #include <string>
 #include <vector>
 
@@ -12,6 +14,12 @@ namespace chm::test {
 
 inline constexpr uint64_t kMs = 1000000;
 inline constexpr uint64_t kUs = 1000;
+
+// A number from the environment (a seed, a count), or `dflt` when unset.
+inline std::uint64_t env_or(const char* name, std::uint64_t dflt) {
+    const char* v = std::getenv(name);
+    return v && *v ? std::strtoull(v, nullptr, 10) : dflt;
+}
 
 struct Event {
     uint64_t t;

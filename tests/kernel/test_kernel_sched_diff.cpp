@@ -248,11 +248,6 @@ std::string check(const Case& c, bool sliced, std::uint64_t seed) {
     return diff.str();
 }
 
-std::uint64_t env_or(const char* name, std::uint64_t dflt) {
-    const char* v = std::getenv(name);
-    return v && *v ? std::strtoull(v, nullptr, 10) : dflt;
-}
-
 class SchedDiff : public ::testing::TestWithParam<chm_sched_policy> {};
 
 TEST_P(SchedDiff, RandomSetsMatchTheReferenceWholeAndSliced) {

@@ -102,11 +102,6 @@ void driver(void* p) {
     for (chm_tid_t id : waiting) ASSERT_EQ(chm_task_destroy(id), 0);
 }
 
-std::uint64_t env_or(const char* name, std::uint64_t dflt) {
-    const char* v = std::getenv(name);
-    return v && *v ? std::strtoull(v, nullptr, 10) : dflt;
-}
-
 class Slots : public KernelTest {};
 
 TEST_F(Slots, ASpawnTakesTheSlotTheRuleNames) {

@@ -44,11 +44,9 @@ CHM_HOT void make_ready_locked(Tcb* t, bool keep_place) {
     }
 }
 
-CHM_HOT void unready_locked(Tcb* t) {
-    if (t->in_ready) {
-        t->in_ready = false;
-        sched_dequeue_locked(t);
-    }
+CHM_HOT void unready_queued_locked(Tcb* t) {
+    t->in_ready = false;
+    sched_dequeue_locked(t);
 }
 
 // Can `head`, waiting, come before the running task `t` without an event?

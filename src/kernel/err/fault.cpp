@@ -38,7 +38,6 @@ struct FaultStack {
     Tcb* owner = nullptr;  // the task running on it, until that task ends
 };
 FaultStack g_stacks[kFaultStacks];
-int g_stacks_owned = 0;  // stacks with an owner: none at almost every task's end
 std::size_t g_page = 4096;
 
 // The fault being delivered: written by the handler, read by the entry,
@@ -134,7 +133,6 @@ void on_fault(const port::FaultInfo& f, void* ucontext) {
             }
         if (!s) fail_stop(f, code, cur, "with every fault stack in use");
         s->owner = cur;
-        ++g_stacks_owned;
         sp = reinterpret_cast<std::uintptr_t>(s->lo) + kFaultStackSize;
         on_fault_stack = true;
     }
@@ -175,17 +173,12 @@ bool err_on_fault_stack(const Tcb* t) {
 bool err_kernel_thread() { return port::on_fault_thread(); }
 
 void err_fault_stack_release_locked(Tcb* t) {
-    if (!g_stacks_owned) return;
     for (auto& x : g_stacks)
-        if (x.owner == t) {
-            x.owner = nullptr;  // it is switched away for good
-            --g_stacks_owned;
-        }
+        if (x.owner == t) x.owner = nullptr;  // it is switched away for good
 }
 
 int err_kernel_init() {
     g_page = std::size_t(sysconf(_SC_PAGESIZE));
-    g_stacks_owned = 0;
     for (auto& x : g_stacks) {
         x.owner = nullptr;
         if (x.lo) continue;

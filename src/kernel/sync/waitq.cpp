@@ -16,9 +16,8 @@ void waitq_insert_locked(WaitQueue* q, Tcb* t) {
     t->wq = q;
 }
 
-void waitq_remove_locked(Tcb* t) {
+void waitq_unlink_locked(Tcb* t) {
     WaitQueue* q = t->wq;
-    if (!q) return;
     for (Tcb** link = &q->head; *link; link = &(*link)->wnext) {
         if (*link == t) {
             *link = t->wnext;

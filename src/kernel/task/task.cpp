@@ -207,12 +207,10 @@ CHM_HOT void release_cycle_locked(Tcb* t, std::uint64_t release) {
 
 void task_end_locked(Tcb* t) {
     err_task_ended_locked(t);
-    // Each unlinking only where there is a link (a call apiece cost ~1 ns
-    // of a spawn + run + exit).
-    if (t->in_ready) unready_locked(t);
-    if (t->wq) waitq_remove_locked(t);
-    if (t->tmr.idx >= 0) timer_cancel_locked(&t->tmr);
-    if (t->dl.idx >= 0) timer_cancel_locked(&t->dl);
+    unready_locked(t);
+    waitq_remove_locked(t);
+    timer_cancel_locked(&t->tmr);
+    timer_cancel_locked(&t->dl);
     g_k.ops->retire(g_k.ops_self, &t->s);
     if (!t->end_reason) t->end_reason = CHM_TASK_DESTROYED;
     t->state = TaskState::Ended;

@@ -19,10 +19,7 @@ CHM_HOT void timer_add_locked(TimerNode* n, std::uint64_t due) {
     g_k.timers.push(n, timer_order(n));
 }
 
-void timer_cancel_locked(TimerNode* n) {
-    CHM_ASSERT_LOCKED();
-    if (n->idx >= 0) g_k.timers.remove(n);
-}
+void timer_remove_locked(TimerNode* n) { g_k.timers.remove(n); }
 
 std::uint64_t next_due_locked() {
     std::uint64_t due = 0;

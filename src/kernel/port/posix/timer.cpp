@@ -29,7 +29,6 @@ constexpr std::size_t kAltStackSize = 64 * 1024;
 // 32-bit: 64-bit atomics take a lock on m68k, never in a signal handler.
 std::uint32_t g_stray = 0;
 
-
 std::uint32_t g_deferred = 0;
 unsigned g_defer_streak = 0;  // consecutive deferrals: backs the retry off
 
