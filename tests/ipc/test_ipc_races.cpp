@@ -8,9 +8,14 @@
 #include <fstream>
 #include <string>
 
+#include "chimera/msgq.h"
+#include "chimera/rsem.h"
 #include "chimera/rtpu.h"
+#include "chimera/shm.h"
 #include "ipc/backplane/backplane.hpp"
 #include "ipc/backplane/stop_point.hpp"
+#include "ipc/msgq/msgq.hpp"
+#include "ipc/rsem/rsem.hpp"
 #include "ipc/xmail/xmail.hpp"
 #include "ipc_fixture.hpp"
 
@@ -261,6 +266,125 @@ TEST_F(IpcRaces, ASenderKilledMidWriteLosesItsRecord) {
     EXPECT_EQ(std::string(xmail::payload_of(rec), mine.size()), mine);
     xmail::cancel(&p);
     EXPECT_EQ(check_now(), "");
+}
+
+// The open-time check of a remote semaphore (validate_sem) reads a free
+// lock, the counters, every waiter record, then a free lock and the same
+// counters again. A P's whole registration can fall between those two
+// free-lock readings. When P stored its counters before its record, a
+// registration held there (its counters new, its record not yet waiting)
+// while the checker read the counters, and finished while the checker's
+// scan was done, made a sound semaphore read as corrupt: "nwaiting is 1,
+// 0 records wait" (seen once under ThreadSanitizer in
+// IpcValidate.ALiveSemaphoreInUseIsNeverReportedCorrupt). Now records go
+// first and counters last, and the checker reads counters first.
+TEST_F(IpcRaces, ARegistrationBetweenTheCheckersReadingsIsNotCorruption) {
+    create();
+    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), "judge", nullptr), 0) << chm_bp_last_error();
+    chm_rsem_t* sem = nullptr;
+    ASSERT_EQ(chm_rsem_create("race", CHM_SEM_COUNTING, 0, CHM_SHM_COMMON, &sem), 0) << chm_bp_last_error();
+    const ipc::rsem::Rsem* s = ipc::rsem::rsem_at(sem);
+
+    Pipe waiter_ready, waiter_go, waiter_said, checker_said;
+    const pid_t waiter = spawn([&] {
+        chm_rsem_t* mine = nullptr;
+        if (chm_bp_attach_host(path_.c_str(), "waiter", nullptr) != 0 || chm_rsem_open("race", &mine) != 0) return 1;
+        waiter_ready.put('r');
+        if (waiter_go.get(30000) != 'g') return 2;
+        stop_at("rsem.p.locked");
+        waiter_said.put(chm_rsem_p_timed(mine, 20'000'000'000ull) == 0 ? 'P' : 'X');
+        return chm_bp_leave();
+    });
+    ASSERT_EQ(waiter_ready.get(), 'r');
+    // The checker attaches (validating every object) and opens the
+    // semaphore (validating it again); it stops after its first reading of
+    // a free lock, and again after its first scan of the records.
+    const pid_t checker = spawn([&] {
+        stop_at("rsem.validate.lock_read,rsem.validate.scanned");
+        chm_rsem_t* mine = nullptr;
+        int r = chm_bp_attach_host(path_.c_str(), "checker", nullptr);
+        if (r == 0) r = chm_rsem_open("race", &mine);
+        checker_said.put(r == 0 ? 'O' : r == -EBADMSG ? 'C' : 'X');
+        if (r != 0) std::fprintf(stderr, "checker: %s\n", chm_bp_last_error());
+        return 0;
+    });
+    ASSERT_TRUE(wait_stopped(checker));  // it read the lock free
+    waiter_go.put('g');
+    ASSERT_TRUE(wait_stopped(waiter));   // P holds the lock (rsem.p.locked)
+    kill(checker, SIGCONT);
+    ASSERT_TRUE(wait_stopped(checker));  // it read the counters and scanned the records
+    kill(waiter, SIGCONT);
+    // The registration done: one waiter, the lock free again.
+    const std::uint64_t end = now_ns() + 10'000'000'000ull;
+    while ((s->nwaiting.load() != 1 || s->lock.token.load() != 0) && now_ns() < end) sleep_us(1000);
+    ASSERT_EQ(s->nwaiting.load(), 1u);
+    ASSERT_EQ(s->lock.token.load(), 0u);
+    kill(checker, SIGCONT);
+    EXPECT_EQ(checker_said.get(10000), 'O') << "a sound semaphore, with one waiter registered while it was "
+                                                "checked, was refused as corrupt (see the checker's stderr)";
+    EXPECT_EQ(reap(checker), 0);
+    EXPECT_EQ(chm_rsem_v(sem), 0);
+    EXPECT_EQ(waiter_said.get(10000), 'P');
+    EXPECT_EQ(reap(waiter), 0);
+    EXPECT_EQ(check_now(), "");
+    EXPECT_EQ(chm_rsem_close(sem), 0);
+}
+
+// The same for a message queue's waiter records: the walk without its
+// lock (chm_bp_validate, which chimera start and status run beside live
+// RTPUs; an open walks it under its lock) read the records, then the
+// waiting counts, and judged them only if the lock
+// was free and no message moved from before the walk to after it. A
+// receiver registering in between (no message moved) made a sound queue
+// read as corrupt: "recv_waiting 1 / send_waiting 0, the records say
+// 0 / 0". The stamp now holds the waiting counts and the ticket counter.
+TEST_F(IpcRaces, AReceiverRegisteringDuringTheCheckersWalkIsNotCorruption) {
+    create();
+    ASSERT_EQ(chm_bp_attach_host(path_.c_str(), "judge", nullptr), 0) << chm_bp_last_error();
+    chm_msgq_attr_t attr;
+    chm_msgq_attr_init(&attr);
+    attr.max_msg = 16;
+    attr.max_count = 4;
+    chm_msgq_t* q = nullptr;
+    ASSERT_EQ(chm_msgq_create("walked", &attr, CHM_MSGQ_COMMON, &q), 0) << chm_bp_last_error();
+    const auto* h = reinterpret_cast<const ipc::msgq::QueueHeader*>(q);
+
+    Pipe receiver_ready, receiver_go, receiver_said, checker_said;
+    const pid_t receiver = spawn([&] {
+        chm_msgq_t* mine = nullptr;
+        if (chm_bp_attach_host(path_.c_str(), "receiver", nullptr) != 0 || chm_msgq_open("walked", &mine) != 0)
+            return 1;
+        receiver_ready.put('r');
+        if (receiver_go.get(30000) != 'g') return 2;
+        char buf[16];
+        const int r = chm_msgq_receive_timed(mine, buf, sizeof buf, nullptr, 20'000'000'000ull);
+        if (r != 3) std::fprintf(stderr, "receiver: %d: %s\n", r, chm_bp_last_error());
+        receiver_said.put(r == 3 ? 'R' : 'X');
+        return chm_bp_leave();
+    });
+    ASSERT_EQ(receiver_ready.get(), 'r');
+    const pid_t checker = spawn([&] {
+        stop_at("msgq.validate.scanned");  // after the waiter records, before the waiting counts
+        const int r = chm_bp_validate(path_.c_str());  // what chimera status runs beside live RTPUs
+        checker_said.put(r == 0 ? 'O' : r == -EBADMSG ? 'C' : 'X');
+        if (r != 0) std::fprintf(stderr, "checker: %s\n", chm_bp_last_error());
+        return 0;
+    });
+    ASSERT_TRUE(wait_stopped(checker));
+    receiver_go.put('g');
+    const std::uint64_t end = now_ns() + 10'000'000'000ull;
+    while ((h->recv_waiting.load() != 1 || h->lock.token.load() != 0) && now_ns() < end) sleep_us(1000);
+    ASSERT_EQ(h->recv_waiting.load(), 1u) << "the receiver did not come to wait";
+    ASSERT_EQ(h->lock.token.load(), 0u);
+    kill(checker, SIGCONT);
+    EXPECT_EQ(checker_said.get(10000), 'O') << "a sound queue, with a receiver registered while it was walked, "
+                                                "was refused as corrupt (see the checker's stderr)";
+    EXPECT_EQ(reap(checker), 0);
+    EXPECT_EQ(chm_msgq_send(q, 0, 0, "abc", 3), 0);
+    EXPECT_EQ(receiver_said.get(10000), 'R');
+    EXPECT_EQ(reap(receiver), 0);
+    EXPECT_EQ(check_now(), "");
+    EXPECT_EQ(chm_msgq_close(q), 0);
 }
 
 }  // namespace

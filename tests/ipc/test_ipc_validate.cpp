@@ -186,9 +186,15 @@ TEST_F(IpcValidate, ALiveQueueInUseIsNeverReportedCorrupt) {
             if (chm_msgq_try_receive(q, &got, sizeof got, nullptr) >= 0) moved.fetch_add(1);
         }
     });
+    std::thread waiter([&] {  // a waiter record taken, granted or withdrawn at its timeout
+        std::uint32_t got = 0;
+        while (!stop.load())
+            if (chm_msgq_receive_timed(q, &got, sizeof got, nullptr, 100'000) >= 0) moved.fetch_add(1);
+    });
     const Checks c = check_repeatedly();
     stop.store(true);
     user.join();
+    waiter.join();
     EXPECT_GT(moved.load(), 100u) << "the queue was not in use";
     EXPECT_EQ(c.refused, 0) << "of " << c.checks << " checks; the first: " << c.first;
     EXPECT_EQ(chm_msgq_close(q), 0);

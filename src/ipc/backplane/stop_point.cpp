@@ -29,9 +29,14 @@ constexpr Named kActions[] = {{"stop", Action::Stop},       {"kill", Action::Kil
                               {"abort", Action::Abort},     {"fault", Action::Fault},
                               {"destroy", Action::Destroy}, {"abort_cycle", Action::AbortCycle}};
 
-char g_name[128];                  // the armed point's name (written before g_state says 2)
+// The armed points' names: the variable's text with each ',' made a '\0'
+// (written before g_state says 2); one action for them all.
+constexpr int kMaxPoints = 8;
+char g_names[128];
+const char* g_name[kMaxPoints];
+int g_points = 0;
 Action g_action = Action::Stop;
-std::atomic<bool> g_fired{false};  // acts once per process: a retry loop passes the point again
+std::atomic<unsigned> g_fired{0};  // a bit per point: each acts once per process (a retry loop passes it again)
 
 void off() { g_state.store(1, std::memory_order_relaxed); }
 
@@ -39,11 +44,11 @@ void read_env() {
     const char* f = std::getenv("CHIMERA_FAULT_AT");
     const char* e = f && *f ? f : std::getenv("CHIMERA_STOP_AT");
     // A name longer than the buffer cannot be one of ours: off.
-    if (!e || !*e || std::strlen(e) >= sizeof g_name) return off();
-    std::strcpy(g_name, e);
+    if (!e || !*e || std::strlen(e) >= sizeof g_names) return off();
+    std::strcpy(g_names, e);
     g_action = Action::Stop;
     if (e == f) {
-        char* colon = std::strrchr(g_name, ':');
+        char* colon = std::strrchr(g_names, ':');
         bool known = false;
         if (colon)
             for (const Named& a : kActions)
@@ -58,6 +63,13 @@ void read_env() {
             return off();
         }
         *colon = '\0';
+    }
+    g_points = 0;
+    for (char* p = g_names; g_points < kMaxPoints;) {
+        g_name[g_points++] = p;
+        p = std::strchr(p, ',');
+        if (!p) break;
+        *p++ = '\0';
     }
     g_state.store(2, std::memory_order_release);
 }
@@ -84,12 +96,15 @@ void hit(const char* name) {
         if (g_state.compare_exchange_strong(unread, 3, std::memory_order_acquire)) read_env();
         s = g_state.load(std::memory_order_acquire);
     }
-    if (s != 2 || std::strcmp(name, g_name) != 0) return;
+    if (s != 2) return;
+    int point = 0;
+    while (point < g_points && std::strcmp(name, g_name[point]) != 0) ++point;
+    if (point == g_points) return;
     // The task actions wait for a task to pass the point (a host thread
     // of the same process passes it untouched).
     const bool task_action = g_action != Action::Stop && g_action != Action::Kill;
     if (task_action && !in_task()) return;
-    if (g_fired.exchange(true)) return;
+    if (g_fired.fetch_or(1u << point) & (1u << point)) return;
     switch (g_action) {
     case Action::Stop: ::raise(SIGSTOP); break;  // every thread stops; SIGCONT goes on from here
     case Action::Kill: ::raise(SIGKILL); break;
@@ -101,7 +116,7 @@ void hit(const char* name) {
 }
 
 void reload() {
-    g_fired.store(false);
+    g_fired.store(0);
     g_state.store(0, std::memory_order_release);
 }
 

@@ -4,6 +4,8 @@
 // itself there (SIGSTOP, the whole process) the first time it passes that
 // point, so a test can hold it at exactly that instant, act on the
 // backplane from other processes, then SIGCONT it (tests/ipc/test_ipc_races.cpp).
+// A list, CHIMERA_STOP_AT=<a>,<b>, stops at each of them once: a test that
+// holds a process at two instants of one call.
 //
 // The same points inject faults: CHIMERA_FAULT_AT=<name>:<action> does,
 // the first time a task (or for kill, any thread) passes <name>: `abort`

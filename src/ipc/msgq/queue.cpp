@@ -154,8 +154,8 @@ Waiter* register_locked(QueueHeader* q, const Geo& g, std::uint32_t state, std::
     for (std::uint32_t i = 0; i < g.max_waiters; ++i) {
         Waiter* w = waiter_at(q, g, i);
         if (w->state.load(R) != kWaiterFree) continue;
-        std::uint32_t t = bump(q->next_ticket, 1);
-        while (!kernel::word_granted(t)) t = bump(q->next_ticket, 1);  // a grant value
+        std::uint32_t t = q->next_ticket.load(R);
+        while (!kernel::word_granted(t)) ++t;  // a grant value
         w->word.store(initial_word, R);
         w->ticket.store(t, R);
         w->token.store(me, R);
@@ -164,6 +164,10 @@ Waiter* register_locked(QueueHeader* q, const Geo& g, std::uint32_t state, std::
         w->urgency.store(who.urgency, R);
         w->state.store(state, std::memory_order_release);
         bump(waiting_of(q, state), 1);
+        // The ticket counter last: a checker whose before-and-after stamp
+        // (validate_entry) saw it unchanged saw no registration land
+        // halfway through its walk.
+        q->next_ticket.store(t + 1, std::memory_order_release);
         return w;
     }
     return nullptr;

@@ -10,6 +10,7 @@
 #include <cstdarg>
 #include <cstdio>
 
+#include "ipc/backplane/stop_point.hpp"
 #include "ipc/msgq/msgq.hpp"
 
 namespace chm::ipc::msgq {
@@ -102,6 +103,7 @@ int validate_locked(QueueHeader* q, const Geo& g, char* why, std::size_t n) {
         recv += st == kWaiterRecv;
         send += st == kWaiterSend;
     }
+    CHM_STOP_POINT("msgq.validate.scanned");
     if (q->recv_waiting.load(R) != recv || q->send_waiting.load(R) != send)
         return corrupt(why, n, "recv_waiting %u / send_waiting %u, the records say %u / %u", q->recv_waiting.load(R),
                        q->send_waiting.load(R), recv, send);
@@ -118,15 +120,23 @@ int validate_entry(const bp::View& v, std::uint32_t off, std::uint32_t size, con
     int r = read_geometry(q, size, &g, what, sizeof what);
     // The lists are walked without the lock (a checker may not take it): a
     // verdict counts only when the lock was free and no send, receive or
-    // repair happened from before the walk to after it; otherwise the queue
-    // was mid-change (a dead holder's is rebuilt by whoever robs the lock)
-    // and the walk is tried again, a few times, then only the geometry
-    // stands. (Before, a send landing during the walk read as corruption:
-    // "count is 1, the lists hold 0".)
+    // repair happened and no waiter record was taken or given back from
+    // before the walk to after it; otherwise the queue was mid-change (a
+    // dead holder's is rebuilt by whoever robs the lock) and the walk is
+    // tried again, a few times, then only the geometry stands. (Before, a
+    // send landing during the walk read as corruption: "count is 1, the
+    // lists hold 0"; and a receiver registering or withdrawing during it,
+    // "recv_waiting 1 / send_waiting 0, the records say 0 / 0": the waiting
+    // counts and the ticket counter joined the stamp; test_ipc_races.cpp.)
+    // Every change stores the counters it moves after the structure, the
+    // ticket counter last, so a stamp that reads one new sees its change.
+    constexpr auto A = std::memory_order_acquire;
     for (int attempt = 0; r == 0 && attempt < 8; ++attempt) {
         const auto stamp = [q] {
-            return std::array<std::uint32_t, 5>{q->lock.token.load(std::memory_order_acquire), q->sent.load(R),
-                                                 q->received.load(R), q->repairs.load(R), q->broken.load(R)};
+            return std::array<std::uint32_t, 8>{q->lock.token.load(A),   q->sent.load(A),
+                                                 q->received.load(A),     q->repairs.load(A),
+                                                 q->broken.load(A),       q->next_ticket.load(A),
+                                                 q->recv_waiting.load(A), q->send_waiting.load(A)};
         };
         const auto before = stamp();
         if (before[0] != 0 || before[4] != 0) break;  // held or broken: geometry only

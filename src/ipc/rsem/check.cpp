@@ -7,6 +7,7 @@
 #include <cstdint>
 #include <cstdio>
 
+#include "ipc/backplane/stop_point.hpp"
 #include "ipc/rsem/rsem.hpp"
 
 using namespace chm::bp;
@@ -31,18 +32,29 @@ int validate_sem(const Rsem* s, char* why, std::size_t n) {
     // seq because a grant and a new waiter in between bring nwaiting back
     // to its value (seen under ThreadSanitizer's timing: "nwaiting is 1,
     // 0 records wait"); every waiter that enqueues moves seq.
+    //
+    // A whole change can still fall between the two readings of a free
+    // lock. That is why every change stores the records first and the
+    // counters (nwaiting, seq) after them, and this scan reads the
+    // counters first and the records after them, each load acquiring:
+    // counters read new come with their records, and a record read new
+    // means the closing reads see its change's lock held or its counters
+    // new. (Counters first in P let a registration held between the
+    // reads show "nwaiting is 1, 0 records wait": test_ipc_races.cpp.)
+    constexpr auto A = std::memory_order_acquire;
     for (int attempt = 0; attempt < 8; ++attempt) {
-        const std::uint32_t token = s->lock.token.load(std::memory_order_acquire);
-        const std::uint32_t nwaiting = s->nwaiting.load(R), count = s->count.load(R), seq = s->seq.load(R);
+        const std::uint32_t token = s->lock.token.load(A);
+        CHM_STOP_POINT("rsem.validate.lock_read");
+        const std::uint32_t seq = s->seq.load(A), nwaiting = s->nwaiting.load(A), count = s->count.load(A);
         std::uint32_t waiting = 0;
         for (std::uint32_t i = 0; i < CHM_RSEM_WAITERS; ++i) {
-            const std::uint32_t st = s->w[i].state.load(R);
+            const std::uint32_t st = s->w[i].state.load(A);
             if (st > kGranted) return corrupt(why, n, "waiter %u: state %u is not FREE, WAITING or GRANTED", i, st);
             waiting += st == kWaiting;
         }
-        std::atomic_thread_fence(std::memory_order_acquire);
-        const bool stable = token == 0 && s->lock.token.load(R) == 0 && s->nwaiting.load(R) == nwaiting &&
-                            s->count.load(R) == count && s->seq.load(R) == seq;
+        CHM_STOP_POINT("rsem.validate.scanned");
+        const bool stable = token == 0 && s->lock.token.load(A) == 0 && s->nwaiting.load(A) == nwaiting &&
+                            s->count.load(A) == count && s->seq.load(A) == seq;
         if (!stable) continue;
         if (nwaiting != waiting) return corrupt(why, n, "nwaiting is %u, %u records wait", nwaiting, waiting);
         return 0;
@@ -101,9 +113,9 @@ void rsem_recover(const View& v, std::uint32_t index, std::uint32_t dead_slot, s
     for (Waiter& w : s->w) {
         if (w.owner.load() != make_token(dead_slot, dead_gen)) continue;
         const std::uint32_t st = w.state.load();
-        if (st == kWaiting) s->nwaiting.fetch_sub(1);
         if (st == kGranted) ++passed;
-        w.state.store(kFree);
+        w.state.store(kFree);  // the record before nwaiting (validate_sem)
+        if (st == kWaiting) s->nwaiting.fetch_sub(1);
     }
     lock_clear_dirty(&s->lock);
     Waiter* to_wake[CHM_RSEM_WAITERS];

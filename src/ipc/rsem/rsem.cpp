@@ -133,10 +133,11 @@ int rsem::give_locked(Rsem* s, Waiter** woken) {
     if (Waiter* w = most_urgent_locked(s)) {
         constexpr auto R = std::memory_order_relaxed;
         lock_mark_dirty(&s->lock);
-        s->nwaiting.store(s->nwaiting.load(R) - 1, R);
         // Before the grant (whose exchange releases it): the waiter frees
-        // its record after seeing the grant, without the lock.
-        w->state.store(kGranted, R);
+        // its record after seeing the grant, without the lock. The record
+        // before nwaiting, as in P.
+        w->state.store(kGranted, std::memory_order_release);
+        s->nwaiting.store(s->nwaiting.load(R) - 1, std::memory_order_release);
         CHM_STOP_POINT("rsem.v.granted");  // mid-grant: GRANTED, its word not stored yet
         const bool watched = store_grant(grant_of(s, w), 1);
         lock_clear_dirty(&s->lock);
@@ -180,8 +181,8 @@ void withdraw_abandoned(void* p, std::uint32_t index) {
     if (me->owner.load() == a->token) {
         const std::uint32_t st = me->state.load();
         lock_mark_dirty(&s->lock);
+        me->state.store(kFree);  // the record before nwaiting, as in P
         if (st == kWaiting) s->nwaiting.store(s->nwaiting.load() - 1);
-        me->state.store(kFree);
         lock_clear_dirty(&s->lock);
         if (st == kGranted) (void)give_locked(s, &woken);  // (marks the lock dirty itself)
     }
@@ -320,11 +321,18 @@ static int rsem_p_impl(chm_rsem_t* h, WaitLimit limit) {
     const std::uint32_t prio = std::uint32_t(chm::kernel::remote_waiter_priority());
     const WaiterId who = waiter_self();
     constexpr auto R = std::memory_order_relaxed;
+    // The record before the counters (nwaiting, seq), each release: the
+    // checker that reads a free lock on both sides of its scan relies on
+    // it (validate_sem, check.cpp).
+    constexpr auto W = std::memory_order_release;
     lock_mark_dirty(&s->lock);
+    // Locked and dirty, nothing stored yet: here a task's end (the only
+    // way one ends inside this section is an injected fault) leaves no
+    // half-made record that names it, and the next user's repair recounts.
+    // (Before the records-first order this point sat after the counters:
+    // test_ipc_races.cpp holds a registration here against the checker.)
+    CHM_STOP_POINT("rsem.p.locked");
     const std::uint32_t seq = s->seq.load(R) + 1;
-    s->seq.store(seq, R);
-    s->nwaiting.store(s->nwaiting.load(R) + 1, R);
-    CHM_STOP_POINT("rsem.p.locked");  // mid-change: nwaiting counts a record not yet waiting
     std::uint32_t* const grant = grant_of(s, me);
     __atomic_store_n(grant, initial, __ATOMIC_RELAXED);
     me->owner.store(a->token, R);
@@ -332,7 +340,9 @@ static int rsem_p_impl(chm_rsem_t* h, WaitLimit limit) {
     me->seq.store(seq, R);
     me->task.store(who.task, R);
     me->urgency.store(who.urgency, R);
-    me->state.store(kWaiting, R);
+    me->state.store(kWaiting, W);
+    s->nwaiting.store(s->nwaiting.load(R) + 1, W);
+    s->seq.store(seq, W);
     lock_clear_dirty(&s->lock);
     unlock(s);
 
@@ -351,10 +361,12 @@ static int rsem_p_impl(chm_rsem_t* h, WaitLimit limit) {
     if (int e = lock(s)) return e;
     if (chm::kernel::word_granted(__atomic_load_n(grant, __ATOMIC_SEQ_CST))) {
         r = 0;  // granted, perhaps just as the wait timed out
-    } else if (me->state.load() == kWaiting) {
-        s->nwaiting.fetch_sub(1);
+        me->state.store(kFree);
+    } else {
+        const bool waiting = me->state.load() == kWaiting;
+        me->state.store(kFree);  // the record before nwaiting, as in P
+        if (waiting) s->nwaiting.fetch_sub(1);
     }
-    me->state.store(kFree);
     unlock(s);
     return r;
 }
