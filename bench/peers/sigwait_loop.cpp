@@ -11,13 +11,13 @@
 #include <cstdint>
 #include <vector>
 
-#include "../harness.hpp"
+#include "sigwait_loop.hpp"
 
 namespace chm::bench {
 namespace {
 
 constexpr std::uint64_t kPeriodNs = 1000000;  // 1 kHz
-constexpr int kWarmupPeriods = 20;
+constexpr int kWarmupPeriods = kSigwaitWarmupPeriods;
 
 double percentile(const std::vector<double>& sorted, double q) {
     const std::size_t rank = std::size_t(std::ceil(q * double(sorted.size())));
@@ -28,9 +28,9 @@ timespec to_ts(std::uint64_t ns) {
     return {time_t(ns / 1000000000u), long(ns % 1000000000u)};
 }
 
-void sigwait_lateness(Session& s) {
-    Session::pin(s.cpu(0));
-    const int periods = s.quick() ? 500 : 10000;
+}  // namespace
+
+void sigwait_periods(int periods, SigwaitRun* out) {
     const int sig = SIGRTMIN + 1;
     sigset_t set, old_mask;
     sigemptyset(&set);
@@ -50,9 +50,9 @@ void sigwait_lateness(Session& s) {
     its.it_value = to_ts(start);
     its.it_interval = to_ts(kPeriodNs);
 
-    std::vector<double> late;
-    late.reserve(std::size_t(periods));
-    std::uint64_t next = 0, missed = 0;
+    std::vector<double>& late = out->late;
+    late.reserve(late.size() + std::size_t(periods));
+    std::uint64_t next = 0;
     auto cleanup = [&] {
         timer_delete(timer);
         siginfo_t info;
@@ -76,7 +76,7 @@ void sigwait_lateness(Session& s) {
             if (i >= kWarmupPeriods) {
                 for (std::uint64_t j = next; j <= k; ++j)
                     late.push_back(double(now) - double(start + j * kPeriodNs));
-                missed += std::uint64_t(info.si_overrun);
+                out->overrun += std::uint64_t(info.si_overrun);
             }
             next = k + 1;
         }
@@ -85,6 +85,17 @@ void sigwait_lateness(Session& s) {
         throw;
     }
     cleanup();
+}
+
+namespace {
+
+void sigwait_lateness(Session& s) {
+    Session::pin(s.cpu(0));
+    const int periods = s.quick() ? 500 : 10000;
+    SigwaitRun run;
+    sigwait_periods(periods, &run);
+    std::vector<double>& late = run.late;
+    const std::uint64_t missed = run.overrun;
 
     s.write_samples("peer_sigwait_1khz_lateness", late);
     std::sort(late.begin(), late.end());

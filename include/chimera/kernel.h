@@ -68,7 +68,21 @@ typedef struct chm_kernel_config {
                            * task made ready ends the poll, a user signal
                            * interrupts the wait (-EINTR). Default 0 (sleep
                            * at once) */
+    int64_t timer_lead_ns; /* an idle RTPU wakes this long ahead of its next
+                           * timer event (a release, a deadline, a timeout)
+                           * and polls until the event is due, so the event
+                           * runs on time instead of one host wake-up
+                           * latency late (tens of µs on a virtual machine);
+                           * never early. Costs up to that much CPU per idle
+                           * period that ends at a timer event.
+                           * CHM_TIMER_LEAD_AUTO (default): learnt, the 75th
+                           * percentile of the host's recent wake-up
+                           * latencies, at most 200 µs (chm_kernel_timer_lead
+                           * reads it); 0: off, the idle RTPU sleeps until
+                           * the host timer fires; 1..1000000: that lead */
 } chm_kernel_config_t;
+
+#define CHM_TIMER_LEAD_AUTO (-1)
 
 /* Fill `cfg` with the defaults above. */
 void chm_kernel_config_init(chm_kernel_config_t* cfg);
@@ -77,7 +91,7 @@ void chm_kernel_config_init(chm_kernel_config_t* cfg);
  * thread (it receives the one timer signal). NULL means defaults.
  * Errors: -EBUSY already initialised; -EINVAL bad config (unknown policy,
  * CHM_SCHED_USER without a complete ops table, quantum_ns or io_poll_ns
- * below 10 µs);
+ * below 10 µs, timer_lead_ns below -1 or above 1 ms);
  * -ENOMEM; or the error of timer creation. */
 CHM_CHECK int chm_kernel_init(const chm_kernel_config_t* cfg);
 
@@ -106,6 +120,11 @@ void chm_kernel_fini(void);
 
 /* The policy in force (after a failed user scheduler: CHM_SCHED_MUF). */
 enum chm_sched_policy chm_kernel_policy(void);
+
+/* The lead (ns) the idle RTPU wakes ahead of a timer event now: the
+ * configured timer_lead_ns, or what CHM_TIMER_LEAD_AUTO has learnt; 0 when
+ * the lead is off, on the virtual clock, or before chm_kernel_init. */
+uint64_t chm_kernel_timer_lead(void);
 
 /* Monotonic time in ns (virtual time in virtual-clock mode). Any context. */
 uint64_t chm_time_now(void);

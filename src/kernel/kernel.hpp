@@ -221,6 +221,8 @@ struct Kernel {
     std::uint64_t slice_start = 0;    // when `current` was dispatched: its quanta end slice_start + k*q
     bool decision_owed = false;       // virtual clock: timers fired as a task's work ended
     std::uint64_t armed_at = 0;       // what the port timer is set to (0 none)
+    std::uint64_t lead_ns = 0;        // the automatic timer lead (time/lead.cpp)
+    std::uint64_t lead_on_time = 0;   // timer events the idle loop reached by polling
     std::uint64_t now_cache = 0;      // last clock reading
 
     // Tasks: TCBs live in one reserved array, so an id or a pointer handed
@@ -309,6 +311,28 @@ void timer_fired_locked(std::uint64_t now);
 // are parked on descriptors), so neither forgets a repeating timer.
 void idle_tick_locked();
 std::uint64_t next_due_locked();
+// What follows the event at `due` (the top of the timer heap), as a gap
+// from it: the repeating timer's interval (time/clock.cpp); 0 when unknown.
+std::uint64_t next_gap_guess_locked(std::uint64_t due);
+
+// ---- timer lead (time/lead.cpp)
+inline constexpr std::uint64_t kLeadMaxAutoNs = 200'000;
+inline constexpr std::uint64_t kLeadStepNs = 1'000;
+// The automatic lead after one more sleep that woke `late` after its
+// timeout: up 3 steps when later than `lead`, else down 1, at most
+// kLeadMaxAutoNs. It settles where a quarter of the wake-ups come later
+// than the lead: their 75th percentile.
+std::uint64_t lead_learn(std::uint64_t lead, std::uint64_t late);
+inline constexpr std::int64_t kLeadMaxNs = 1'000'000;  // a fixed chm_kernel_config.timer_lead_ns
+// The lead in use: 0 off (configured 0, or the virtual clock).
+std::uint64_t timer_lead_locked();
+// The automatic lead's first guess (chm_kernel_init).
+void timer_lead_reset_locked();
+// The idle loop's wait when a timer event lies ahead: sleep until the
+// lead before it, poll until it is due, run it. False (nothing done) when
+// the lead is off or the event too near or absent: the caller waits as
+// before. Mask held.
+bool idle_lead_wait_locked(std::uint64_t now, std::uint64_t poll_ns);
 
 // ---- deadline failures (time/deadline.cpp)
 // The deadline timer of `t`'s cycle fired: count the miss, owe it the handler.

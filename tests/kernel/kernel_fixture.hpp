@@ -42,9 +42,11 @@ protected:
         cfg.quantum_ns = quantum;
         cfg.user_sched = user;
         cfg.user_sched_arg = user_arg;
+        cfg.timer_lead_ns = lead_;
         ASSERT_EQ(chm_kernel_init(&cfg), 0);
         started_ = true;
     }
+    std::int64_t lead_ = CHM_TIMER_LEAD_AUTO;  // set before start()
     void TearDown() override {
         if (started_) chm_kernel_fini();
     }

@@ -44,6 +44,7 @@ void usage(FILE* f) {
     std::fprintf(f,
         "usage: chimera-rtpu [--backplane PATH] --rtpu N [--name NAME]\n"
         "                    [--policy muf|rm|edf|mlf|fixed] [--idle-poll US]\n"
+        "                    [--timer-lead US|auto]\n"
         "                    [--rt-priority P] [--cpu K] [--lock-memory]\n"
         "                    [--programs DIR]... [--]\n"
         "                    [PROGRAM.so [ARG...] [-- PROGRAM.so [ARG...]]...]\n"
@@ -59,6 +60,10 @@ void usage(FILE* f) {
         "--idle-poll US    with nothing to run, poll the mailbox US microseconds\n"
         "                  before sleeping (0..100000, default 0): a wake-up from a\n"
         "                  busy peer then costs no system call\n"
+        "--timer-lead US|auto  an idle RTPU wakes US microseconds (0..1000) ahead of\n"
+        "                  its next timer event and polls until it is due: releases\n"
+        "                  start on time, not one host wake-up latency late. auto\n"
+        "                  (default) learns the host's latency; 0 turns it off\n"
         "--rt-priority P   run the process at SCHED_FIFO priority P (needs\n"
         "                  CAP_SYS_NICE or an rtprio limit)\n"
         "--cpu K           run only on CPU K\n"
@@ -93,6 +98,7 @@ struct Options {
     const char* name = nullptr;
     chm_sched_policy policy = CHM_SCHED_MUF;
     int idle_poll_us = 0;
+    int timer_lead_us = -1;  // -1: automatic (CHM_TIMER_LEAD_AUTO)
     chimera_rtpu::HostRealtime realtime;
     std::vector<Program> programs;
     std::vector<const char*> program_dirs;  // --programs
@@ -149,6 +155,11 @@ Options parse(int argc, char** argv) {
             const char* v = value(a);
             if (!parse_int(v, &o.idle_poll_us) || o.idle_poll_us > 100000)
                 bad("--idle-poll wants microseconds 0..100000, not \"%s\"", v);
+        } else if (!std::strcmp(a, "--timer-lead")) {
+            const char* v = value(a);
+            if (!std::strcmp(v, "auto")) o.timer_lead_us = -1;
+            else if (!parse_int(v, &o.timer_lead_us) || o.timer_lead_us > 1000)
+                bad("--timer-lead wants microseconds 0..1000 or auto, not \"%s\"", v);
         } else if (!std::strcmp(a, "--rt-priority")) {
             const std::string why = chimera_rtpu::parse_fifo_priority(value(a), &o.realtime.fifo_priority);
             if (!why.empty()) bad("%s", why.c_str());
@@ -328,6 +339,7 @@ int main(int argc, char** argv) {
     cfg.policy = o.policy;
     cfg.rtpu_id = o.rtpu;
     cfg.idle_poll_ns = std::uint64_t(o.idle_poll_us) * 1000u;
+    cfg.timer_lead_ns = o.timer_lead_us < 0 ? CHM_TIMER_LEAD_AUTO : std::int64_t(o.timer_lead_us) * 1000;
     auto fail = [&](const char* what, int r) {
         std::fprintf(stderr, "chimera-rtpu: RTPU %d: %s: %s\n", o.rtpu, what, std::strerror(-r));
         chm::host::console::stop();
@@ -392,6 +404,7 @@ int main(int argc, char** argv) {
     if (o.realtime.cpu >= 0) host += ", CPU " + std::to_string(o.realtime.cpu);
     if (o.realtime.lock_memory) host += ", memory locked";
     if (o.idle_poll_us) host += ", idle poll " + std::to_string(o.idle_poll_us) + " us";
+    if (o.timer_lead_us >= 0) host += ", timer lead " + std::to_string(o.timer_lead_us) + " us";
     if (o.host_root)
         host += std::string(", host server for ") + chm::host::server::fs_root() + (o.allow_shell ? " (shells allowed)" : "");
     std::printf("chimera-rtpu: RTPU %d joined %s (pid %d, %s%s, %zu program%s)\n", o.rtpu, path, int(::getpid()),

@@ -5,7 +5,7 @@
 //
 //   chimera start   [--backplane PATH] [--rtpus N] [--program RTPU:PATH[:ARG...]]...
 //                   [--policy P] [--rt-priority P] [--pin] [--lock-memory]
-//                   [--idle-poll US] [--log-terminal] [--timeout S]
+//                   [--idle-poll US] [--timer-lead US|auto] [--log-terminal] [--timeout S]
 //                   [--group NAME] [--programs DIR]...
 //   chimera status  [--backplane PATH] [--watch [--interval S] [--count N | --once]]
 //   chimera load    [--backplane PATH] RTPU PROGRAM [ARG...]
@@ -45,7 +45,8 @@ void usage(FILE* f) {
     std::fprintf(f,
         "usage: chimera start   [--backplane PATH] [--rtpus N] [--program RTPU:PATH[:ARG...]]...\n"
         "                       [--policy muf|rm|edf|mlf|fixed] [--rt-priority P] [--pin]\n"
-        "                       [--lock-memory] [--idle-poll US] [--orphan-output log|drop]\n"
+        "                       [--lock-memory] [--idle-poll US] [--timer-lead US|auto]\n"
+        "                       [--orphan-output log|drop]\n"
         "                       [--log-terminal] [--timeout S]\n"
         "                       [--group NAME] [--programs DIR]... [--host-root DIR]\n"
         "                       [--no-host-server] [--host-allow-shell]\n"
@@ -68,7 +69,7 @@ void usage(FILE* f) {
         "        --log-terminal). An existing backplane is validated first, and a\n"
         "        system already running on it is refused (nothing started, no log\n"
         "        touched). Waits up to S seconds (default 10) until every RTPU runs\n"
-        "        and answers. --rt-priority, --lock-memory, --idle-poll and\n"
+        "        and answers. --rt-priority, --lock-memory, --idle-poll, --timer-lead and\n"
         "        --orphan-output log|drop (tasks' lines while no console owns their\n"
         "        RTPU: to its log, the default, or dropped) go to every\n"
         "        RTPU (see chimera-rtpu --help); --pin runs RTPU n on the n-th allowed\n"
@@ -225,6 +226,12 @@ int main(int argc, char** argv) {
             if (a == "--rt-priority" ? !parse_num(v, 1, 99, &n) : !parse_num(v, 0, 100000, &n))
                 bad(a + (a == "--rt-priority" ? " wants a SCHED_FIFO priority 1..99" : " wants microseconds 0..100000") +
                     ", not \"" + v + "\"");
+            plan.rtpu_options.insert(plan.rtpu_options.end(), {a, v});
+        } else if (a == "--timer-lead" && starting) {
+            const char* v = value();
+            long n = 0;
+            if (std::string(v) != "auto" && !parse_num(v, 0, 1000, &n))
+                bad("--timer-lead wants microseconds 0..1000 or auto, not \"" + std::string(v) + "\"");
             plan.rtpu_options.insert(plan.rtpu_options.end(), {a, v});
         } else if (a == "--lock-memory" && starting) {
             plan.rtpu_options.push_back(a);

@@ -76,7 +76,7 @@ CHM_HOT __attribute__((noinline)) int idle_loop_locked() {
             // The poll watches the parked tasks' words: a grant needs no ring.
             port::idle_wait_locked(poll_ns, &kRemoteWatch);
             remote_scan_locked();
-        } else {
+        } else if (!idle_lead_wait_locked(now, poll_ns)) {
             port::idle_wait_locked(poll_ns);
         }
         // A ring marked pending is dispatched at the top of the loop.
@@ -102,6 +102,7 @@ void chm_kernel_config_init(chm_kernel_config_t* cfg) {
     cfg->rtpu_id = 1;
     cfg->cpu_accounting = 1;
     cfg->io_poll_ns = 1000000;
+    cfg->timer_lead_ns = CHM_TIMER_LEAD_AUTO;
 }
 
 int chm_kernel_init(const chm_kernel_config_t* cfg) {
@@ -112,9 +113,12 @@ int chm_kernel_init(const chm_kernel_config_t* cfg) {
     if (c.quantum_ns && c.quantum_ns < 10000) return record_failure(-EINVAL, "chm_kernel_init");
     if (!c.io_poll_ns) c.io_poll_ns = 1000000;
     if (c.io_poll_ns < 10000) return record_failure(-EINVAL, "chm_kernel_init");
+    if (c.timer_lead_ns < CHM_TIMER_LEAD_AUTO || c.timer_lead_ns > kLeadMaxNs)
+        return record_failure(-EINVAL, "chm_kernel_init");
     if (!c.default_stack) c.default_stack = 64 * 1024;
     if (int e = sched_select(c.policy, c.user_sched, c.user_sched_arg)) return e;
     g_k.cfg = c;
+    timer_lead_reset_locked();
     g_k.switch_timed = c.cpu_accounting || c.quantum_ns;
     g_k.vnow = 0;
     if (!c.virtual_clock) {

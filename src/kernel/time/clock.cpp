@@ -72,8 +72,6 @@ CHM_HOT bool timers_run_locked(std::uint64_t now) {
     return fired;
 }
 
-namespace {
-
 // What follows the event at `due` (the top of the timer heap): the
 // nearer of the next event the heap holds beyond that instant (and its
 // slack), and what the top event itself brings: a release creates its
@@ -96,8 +94,6 @@ std::uint64_t next_gap_guess_locked(std::uint64_t due) {
         if (!gap || next - due < gap) gap = next - due;
     return gap >= kMinRepeatNs ? gap : 0;  // never a storm of ticks
 }
-
-}  // namespace
 
 CHM_HOT void timer_program_locked(std::uint64_t now) {
     if (g_k.cfg.virtual_clock) return;

@@ -75,8 +75,13 @@ public:
     // takes more than kLookBudget steps to tell (an event due at or before
     // `after` is visited with its children: a subtree holding the root).
     static constexpr std::size_t kLookBudget = 64;  // its queue: 256 bytes of a task's stack
+    // The idle loop's (time/lead.cpp), on the kernel thread's own stack:
+    // 8 KiB, enough for 400 events at one instant (200 tasks' releases and
+    // deadlines) and their children.
+    static constexpr std::size_t kIdleLookBudget = 2048;
+    template <std::size_t Budget = kLookBudget>
     std::uint64_t next_due_after(std::uint64_t after) const {
-        std::uint32_t todo[kLookBudget];
+        std::uint32_t todo[Budget];
         std::size_t head = 0, tail = 0;
         std::uint64_t best = 0;
         if (size_) todo[tail++] = 0;
@@ -87,7 +92,7 @@ public:
                 continue;
             }
             for (std::size_t c = kArity * i + 1; c < size_ && c <= kArity * i + kArity; ++c) {
-                if (tail == kLookBudget) return 0;
+                if (tail == Budget) return 0;
                 todo[tail++] = std::uint32_t(c);
             }
         }
