@@ -223,6 +223,7 @@ struct Kernel {
     std::uint64_t armed_at = 0;       // what the port timer is set to (0 none)
     std::uint64_t lead_ns = 0;        // the automatic timer lead (time/lead.cpp)
     std::uint64_t lead_on_time = 0;   // timer events the idle loop reached by polling
+    std::uint32_t lead_score = 0;     // > 0: waits end at their events often enough to lead
     std::uint64_t now_cache = 0;      // last clock reading
 
     // Tasks: TCBs live in one reserved array, so an id or a pointer handed
@@ -323,6 +324,12 @@ inline constexpr std::uint64_t kLeadStepNs = 1'000;
 // kLeadMaxAutoNs. It settles where a quarter of the wake-ups come later
 // than the lead: their 75th percentile.
 std::uint64_t lead_learn(std::uint64_t lead, std::uint64_t late);
+// Whether the idle loop's waits end at their timer events often enough to
+// lead them (time/lead.cpp): up kLeadServed for a wait that did, down 1
+// for one a ring ended first, within 0..kLeadScoreMax; 0: sleep plainly.
+// A ring per event keeps leading; more than kLeadServed per event stops.
+inline constexpr std::uint32_t kLeadServed = 16, kLeadScoreMax = 256;
+std::uint32_t lead_score_next(std::uint32_t score, bool served);
 inline constexpr std::int64_t kLeadMaxNs = 1'000'000;  // a fixed chm_kernel_config.timer_lead_ns
 // The lead in use: 0 off (configured 0, or the virtual clock).
 std::uint64_t timer_lead_locked();

@@ -72,6 +72,30 @@ TEST(LeadEstimator, SettlesAtTheSeventyFifthPercentileOfTheWakeUps) {
     }
 }
 
+// Whether to lead at all: waits that end at their timer events keep the
+// timed sleep; an RTPU woken by many rings per event (messages every few
+// microseconds beside a timeout) stops it, and takes it up again once its
+// events come alone.
+TEST(LeadEstimator, RingsFarMoreOftenThanEventsStopTheTimedSleep) {
+    using kernel::lead_score_next;
+    std::uint32_t score = kernel::kLeadServed;  // as chm_kernel_init leaves it
+    auto run = [&](int rings_per_event, int events) {
+        int led = 0, waits = 0;
+        for (int e = 0; e < events; ++e)
+            for (int w = 0; w <= rings_per_event; ++w) {
+                led += score > 0;
+                ++waits;
+                score = lead_score_next(score, w == rings_per_event);
+            }
+        return double(led) / double(waits);
+    };
+    EXPECT_EQ(run(0, 1000), 1.0) << "a periodic task alone: every wait leads";
+    EXPECT_EQ(run(4, 1000), 1.0) << "a few rings per event: still led";
+    EXPECT_LT(run(1000, 20), 0.05) << "a message stream beside a rare event: the timed sleep stops";
+    EXPECT_EQ(run(0, 10), 1.0) << "events alone again: led at once";
+    EXPECT_LE(score, kernel::kLeadScoreMax);
+}
+
 TEST_F(Lead, TheConfigurationIsCheckedAndTheLeadReadBack) {
     chm_kernel_config_t cfg;
     chm_kernel_config_init(&cfg);

@@ -432,16 +432,18 @@ struct IdleWatch {
 };
 void idle_wait_locked(std::uint64_t poll_ns = 0, const IdleWatch* watch = nullptr);
 
-// The idle wait ahead of a timer event due at `due_ns` (now_ns()): poll
-// the doorbell `poll_ns`, sleep on it until `wake_ns` (before `due_ns`),
-// then poll it until `due_ns`. kIdleDue when `due_ns` came with nothing
-// else (the caller runs the event itself, before the host timer fires);
-// kIdleWoken when a ring or tick came first. *woke_late: how long after
-// `wake_ns` the sleep's own timeout woke the thread (the host's wake-up
-// latency), or UINT64_MAX when it did not end by that timeout. Mask held.
-enum IdleEnd { kIdleWoken, kIdleDue };
-IdleEnd idle_wait_until_locked(std::uint64_t poll_ns, std::uint64_t wake_ns, std::uint64_t due_ns,
-                               std::uint64_t* woke_late);
+// The idle wait ahead of a timer event (the kernel's timer lead), in two
+// steps. idle_sleep_until_locked: poll the doorbell `poll_ns`, then sleep
+// on it until `wake_ns` (now_ns()); kIdleTimedOut when that instant came
+// with nothing else, kIdleWoken when a ring or tick came first.
+// *woke_late: how long after `wake_ns` the sleep's own timeout woke the
+// thread (the host's wake-up latency), or UINT64_MAX when it did not end
+// by that timeout. idle_poll_until_locked: poll the doorbell until
+// `due_ns`; kIdleDue when it came with nothing else (the caller runs the
+// event itself), kIdleWoken when a ring or tick came first. Mask held.
+enum IdleEnd { kIdleWoken, kIdleTimedOut, kIdleDue };
+IdleEnd idle_sleep_until_locked(std::uint64_t poll_ns, std::uint64_t wake_ns, std::uint64_t* woke_late);
+IdleEnd idle_poll_until_locked(std::uint64_t due_ns);
 
 // idle_wait_locked() that also returns when one of `fds` is ready (their
 // revents are filled in) or at `until_ns` (monotonic; 0 = no limit).

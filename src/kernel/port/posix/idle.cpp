@@ -149,32 +149,40 @@ void idle_wait_locked(std::uint64_t poll_ns, const IdleWatch* watch) {
     store(g_db.state, kDbRunning);
 }
 
-IdleEnd idle_wait_until_locked(std::uint64_t poll_ns, std::uint64_t wake_ns, std::uint64_t due_ns,
-                               std::uint64_t* woke_late) {
+namespace {
+
+// Poll the doorbell until `end` (now_ns()): true when it came, false on a
+// ring or tick since `seen`. A ring while polling bumps `seq` and makes
+// no system call (doorbell_ring).
+bool poll_doorbell_until(std::uint32_t seen, std::uint64_t end) {
+    store(g_db.state, kDbPolling);
+    for (unsigned n = 0;; ++n) {
+        if (load(g_db.seq) != seen || g_irq.pending) return false;
+        if ((n & 15) == 0 && now_ns() >= end) return true;
+        relax();
+    }
+}
+
+}  // namespace
+
+IdleEnd idle_sleep_until_locked(std::uint64_t poll_ns, std::uint64_t wake_ns, std::uint64_t* woke_late) {
     *woke_late = UINT64_MAX;
     const std::uint32_t seen = load(g_db.seq);
     if (g_irq.pending || load(g_db.pending)) return kIdleWoken;
-    auto rang = [&] { return load(g_db.seq) != seen || g_irq.pending; };
-    // Polling, a ring bumps `seq` and makes no system call (doorbell_ring).
-    auto poll_until = [&](std::uint64_t end) {
-        store(g_db.state, kDbPolling);
-        for (unsigned n = 0;; ++n) {
-            if (rang()) return false;
-            if ((n & 15) == 0 && now_ns() >= end) return true;
-            relax();
-        }
-    };
     std::uint64_t now = now_ns();
-    if (poll_ns && !poll_until(now + poll_ns < wake_ns ? now + poll_ns : wake_ns)) {
+    if (poll_ns && !poll_doorbell_until(seen, now + poll_ns < wake_ns ? now + poll_ns : wake_ns)) {
         store(g_db.state, kDbRunning);
         return kIdleWoken;
     }
+    IdleEnd end = kIdleTimedOut;
     now = now_ns();
     if (now < wake_ns) {
         store(g_db.state, kDbSleeping);
         // As in idle_wait_locked: a ring or tick after `seen` makes the
         // wait return at once; the timeout is the early wake-up.
-        if (!rang()) {
+        if (load(g_db.seq) != seen || g_irq.pending) {
+            end = kIdleWoken;
+        } else {
             const std::uint64_t left = wake_ns - now;
             timespec ts{time_t(left / 1000000000u), long(left % 1000000000u)};
             const long r = syscall(SYS_futex, g_db.seq, g_db.shared ? FUTEX_WAIT : (FUTEX_WAIT | FUTEX_PRIVATE_FLAG),
@@ -183,9 +191,17 @@ IdleEnd idle_wait_until_locked(std::uint64_t poll_ns, std::uint64_t wake_ns, std
                 const std::uint64_t woke = now_ns();
                 *woke_late = woke > wake_ns ? woke - wake_ns : 0;
             }
+            if (load(g_db.seq) != seen || g_irq.pending || now_ns() < wake_ns) end = kIdleWoken;
         }
     }
-    const bool due = poll_until(due_ns);
+    store(g_db.state, kDbRunning);
+    return end;
+}
+
+IdleEnd idle_poll_until_locked(std::uint64_t due_ns) {
+    const std::uint32_t seen = load(g_db.seq);
+    if (g_irq.pending || load(g_db.pending)) return kIdleWoken;
+    const bool due = poll_doorbell_until(seen, due_ns);
     store(g_db.state, kDbRunning);
     return due ? kIdleDue : kIdleWoken;
 }
