@@ -6,11 +6,13 @@
 // The host's timer wake-up latency on a virtual machine is tens of
 // microseconds, on a loaded one more: a plain timer loop (timer_create +
 // sigwaitinfo) starts its cycle that late. The idle loop knows the next
-// event, so it sleeps on the doorbell until `lead` before it (the futex's
-// own timeout, the thread's timer slack set to 1 ns), then polls the
-// doorbell until the event is due and runs it itself: the host timer,
-// armed for the event, is re-armed for the next one before it fires.
-// Never early: the event runs only once the clock has reached it.
+// event, so it sets the host timer for what follows the event, sleeps on
+// the doorbell until `lead` before it (the futex's own timeout, the
+// thread's timer slack set to 1 ns), then polls the doorbell until the
+// event is due and runs it itself. Never early: the event runs only once
+// the clock has reached it. Not led: events within lead + 20 µs or
+// beyond 20 ms, and an RTPU whose waits rings end far more often than its
+// events (lead_score).
 //
 // Automatic lead: the 75th percentile of the sleep's own wake-up lateness
 // (how long after its timeout the thread ran), learnt online one sample
