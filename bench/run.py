@@ -66,8 +66,13 @@ def machine():
         virt = "no (no hypervisor detected)"
     if container and container != "none":
         virt += f", inside a {container} container"
+    try:
+        clocksource = Path("/sys/devices/system/clocksource/clocksource0/current_clocksource").read_text().strip()
+    except OSError:
+        clocksource = "unknown"
     return {
         "cpu": model,
+        "clocksource": clocksource,
         "cores": f"{os.cpu_count()} online, {len(os.sched_getaffinity(0))} usable by the suite",
         "kernel": f"{platform.system()} {platform.release()} {platform.version()}",
         "virtualised": virt,
@@ -147,6 +152,7 @@ def markdown(rows, rest, info, commands, quick, elapsed):
                 f"* cores: {info['cores']}",
                 f"* kernel: {info['kernel']}",
                 f"* virtualised: {info['virtualised']}",
+                f"* Linux clocksource: {info.get('clocksource', 'not recorded')}",
                 f"* date: {info['date']}, commit `{info['commit']}`",
                 f"* mode: {'quick (few short runs: rough figures)' if quick else 'full'}; "
                 f"the run took {elapsed:.0f} s",

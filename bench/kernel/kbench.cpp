@@ -1,5 +1,6 @@
 // The kernel rows' shared helpers (see kbench.hpp).
 #include "kbench.hpp"
+#include "port.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -175,5 +176,10 @@ std::string fmt_ns(double ns) {
 }
 
 std::string pinned(Session& s) { return "pinned " + s.cpu_name(0) + ", one RTPU"; }
+
+std::string clock_used() {
+    return chm::port::clock_extrapolates() ? "the kernel's clock extrapolated with the cycle counter"
+                                           : "the kernel's clock read from CLOCK_MONOTONIC (vDSO)";
+}
 
 }  // namespace chm::bench::kb

@@ -146,5 +146,6 @@ double percentile(std::vector<double>& sorted, double q);  // sorted ascending
 
 std::string fmt_ns(double ns);  // "123 ns", "4.56 us"
 std::string pinned(Session& s);  // "pinned cpu0, one RTPU"
+std::string clock_used();        // which clock the switch reads (port::clock_extrapolates)
 
 }  // namespace chm::bench::kb

@@ -42,7 +42,7 @@ void yield_row(Session& s) {
     const Stats st = yield_cost(s, {CHM_SCHED_FIXED, 0, 0});
     // The default configuration is the figure; the faster settings beside it.
     s.emit("yield_switch",
-           kb::pinned(s) + ", " + kb::kDefaultConfig + "; two equal tasks calling chm_task_yield in turn; one "
+           kb::pinned(s) + ", " + kb::kDefaultConfig + ", " + kb::clock_used() + "; two equal tasks calling chm_task_yield in turn; one "
                            "switch (a round / 2) including the quantum's re-arm; FIXED policy, no quantum: " +
                kb::fmt_ns(fixed.median) + "; FIXED, no quantum, cpu_accounting 0 (charged at ticks only): " +
                kb::fmt_ns(st.median) + "; median of " + std::to_string(dflt.runs) + " runs x " +

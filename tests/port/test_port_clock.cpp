@@ -9,6 +9,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <cstdio>
 #include <ctime>
 #include <thread>
 #include <vector>
@@ -60,6 +61,38 @@ TEST(PortClock, EveryReadingLiesWithinAMicrosecondOfClockMonotonic) {
 // it). It may lead by as much as the extrapolated reading before it did:
 // the thread's clock never goes back, so an exact reading just after one
 // that ran a few ns ahead returns that one (CI saw 35 ns on another host).
+// A healthy machine never trips the interval check: a counter that was
+// trusted at the first reading is still trusted after many rebases (a
+// check that misfired would silently cost every switch a vDSO call).
+TEST(PortClock, ATrustedCounterStaysTrustedAcrossRebases) {
+    const bool at_start = chm::port::clock_extrapolates();
+    std::printf("clock: %s\n", at_start ? "extrapolated with the cycle counter" : "CLOCK_MONOTONIC");
+    const Check c = read_for(100);
+    EXPECT_EQ(chm::port::clock_extrapolates(), at_start) << "an interval missed the clock on a quiet machine";
+    EXPECT_EQ(c.outside, 0u) << "worst " << c.worst_ns << " ns off";
+}
+
+// The check itself, on made-up intervals: rate 1 ns per cycle (<< 32).
+TEST(PortClock, AnIntervalAgreesWithinItsDriftAndNotBeyond) {
+    using chm::port::clock_detail::interval_agrees;
+    using chm::port::clock_detail::kIntervalDriftNs;
+    constexpr std::uint64_t kOne = std::uint64_t(1) << 32, c0 = 1000000, n0 = 5000000;
+    EXPECT_TRUE(interval_agrees(c0, n0, kOne, c0 + 1000000, n0 + 1000000)) << "an exact interval";
+    EXPECT_TRUE(interval_agrees(c0, n0, kOne, c0 + 1000000, n0 + 1000000 + kIntervalDriftNs))
+        << "missed by the drift plus its 1000 ppm";
+    EXPECT_FALSE(interval_agrees(c0, n0, kOne, c0 + 1000000, n0 + 1000000 + kIntervalDriftNs + 2000))
+        << "a clock that ran on past the counter (the counter stopped: another host)";
+    EXPECT_FALSE(interval_agrees(c0, n0, kOne, c0 + 1000000 + kIntervalDriftNs + 1001, n0 + 1000000))
+        << "a counter that jumped ahead of the clock";
+    EXPECT_FALSE(interval_agrees(c0, n0, kOne, c0 - 1, n0 + 10)) << "a counter that went back";
+    EXPECT_FALSE(interval_agrees(c0, n0, kOne, c0 + 10, n0 - 1)) << "a clock that went back";
+    // One second idle: 1000 ppm of it (~1 ms) is allowed beside the drift.
+    EXPECT_TRUE(interval_agrees(c0, n0, kOne, c0 + 1000000000, n0 + 1000000000 + 1000000 + kIntervalDriftNs));
+    EXPECT_FALSE(interval_agrees(c0, n0, kOne, c0 + 1000000000, n0 + 1000000000 + 1100000 + kIntervalDriftNs));
+    // A span that would overflow 64 bits before the shift is still judged.
+    EXPECT_FALSE(interval_agrees(0, 0, kOne * 4, ~std::uint64_t(0) / 2, 1));
+}
+
 TEST(PortClock, TheExactReadingIsClockMonotonicAndTheClockGoesOnFromIt) {
     for (int i = 0; i < 1000; ++i) {
         const std::uint64_t a = mono(), t = chm::port::now_exact_ns(), b = mono();

@@ -138,6 +138,10 @@ inline void steer_branch_history(std::uint32_t) {}
 // thread's last reading instead when that one ran ahead (by well under a
 // microsecond).
 std::uint64_t now_exact_ns();
+// Whether now_ns() extrapolates with the cycle counter in this process
+// (decided at the first reading, which this makes if none was made yet;
+// false for good once an interval missed the clock: posix/clock.cpp).
+bool clock_extrapolates();
 
 // ------------------------------------------------------ the interrupt mask
 

@@ -3,16 +3,24 @@
 // CLOCK_MONOTONIC through the vDSO costs ~24 ns on a kvm guest, more than a
 // whole task switch; the kernel reads the clock at every switch (CPU
 // accounting, quanta). Where the processor has a constant-rate cycle
-// counter that Linux itself keeps time with (clocksource "tsc"), now_ns()
-// extrapolates from the last CLOCK_MONOTONIC reading of the calling thread
-// with the counter (~10 ns), and reads CLOCK_MONOTONIC again at least every
-// kRebaseNs: the error against CLOCK_MONOTONIC stays below the counter
-// rate's error over that interval (NTP slews the clock by at most 500 ppm:
-// 0.5 us per ms; the rate is measured over the whole process life, so in
-// practice far less). now_exact_ns() reads CLOCK_MONOTONIC and starts a new
-// interval: the timer paths use it, so an expiry is never judged against a
-// reading that trails the clock that fired it. Elsewhere (no counter, a
-// clocksource Linux does not trust, CHIMERA_CLOCK=vdso) both are
+// counter that Linux's clock is built on, now_ns() extrapolates from the
+// last CLOCK_MONOTONIC reading of the calling thread with the counter
+// (~10 ns), and reads CLOCK_MONOTONIC again at least every kRebaseNs: the
+// error against CLOCK_MONOTONIC stays below the counter rate's error over
+// that interval (NTP slews the clock by at most 500 ppm: 0.5 us per ms;
+// the rate is measured over the whole process life, so in practice far
+// less). Linux's clock is built on the counter when its clocksource is
+// "tsc", and on a kvm guest whose clocksource is "kvm-clock" (the
+// hypervisor's scaled counter: system time + (tsc - stamp) x rate) when
+// the processor says the counter is invariant; such guests are often told
+// "tsc=unstable" only because they may be moved to another host, so every
+// rebase checks the interval it ends: a thread's extrapolation that missed
+// the fresh reading by more than kIntervalDriftNs (+ 1000 ppm of the interval), or
+// a counter that went back, turns the counter off for the process for good
+// (readings still never go back). now_exact_ns() reads CLOCK_MONOTONIC and
+// starts a new interval: the timer paths use it, so an expiry is never
+// judged against a reading that trails the clock that fired it. Elsewhere
+// (no counter, another clocksource, CHIMERA_CLOCK=vdso) both are
 // CLOCK_MONOTONIC.
 #include "port.hpp"
 
@@ -66,14 +74,20 @@ bool read_pair(std::uint64_t* cycles, std::uint64_t* ns) {
     return false;
 }
 
+bool clocksource_is(const char* buf, const char* name) {
+    const std::size_t len = std::strlen(name);
+    return std::strncmp(buf, name, len) == 0 && (buf[len] == '\n' || buf[len] == 0);
+}
+
 bool linux_keeps_time_with_the_counter() {
     if (const char* e = std::getenv("CHIMERA_CLOCK"); e && std::strcmp(e, "vdso") == 0) return false;
     const int fd = ::open("/sys/devices/system/clocksource/clocksource0/current_clocksource", O_RDONLY | O_CLOEXEC);
     if (fd < 0) return false;
-    char buf[16] = {};
+    char buf[32] = {};
     const ssize_t n = ::read(fd, buf, sizeof buf - 1);
     ::close(fd);
-    return n >= 3 && std::strncmp(buf, "tsc", 3) == 0 && (buf[3] == '\n' || buf[3] == 0);
+    if (n <= 0) return false;
+    return clocksource_is(buf, "tsc") || (clocksource_is(buf, "kvm-clock") && cycle_counter_invariant());
 }
 
 // Once per process, by the first caller; others read the clock meanwhile.
@@ -107,6 +121,17 @@ void decide() {
 std::uint64_t rebase(Interval& iv) {
     std::uint64_t c, n;
     if (!read_pair(&c, &n)) return monotonic();
+    if (iv.limit && !clock_detail::interval_agrees(iv.cycles, iv.ns, iv.mult, c, n)) [[unlikely]] {
+        // Moved to another host, or a counter the host does not keep in
+        // step: the clock alone from now on, never below what was read.
+        g_mode.store(kVdso, std::memory_order_release);
+        ++iv.gen;
+        __atomic_signal_fence(__ATOMIC_SEQ_CST);
+        iv.limit = 0;
+        __atomic_signal_fence(__ATOMIC_SEQ_CST);
+        ++iv.gen;
+        return n > iv.last ? n : iv.last;
+    }
     ++iv.gen;
     __atomic_signal_fence(__ATOMIC_SEQ_CST);
     const std::uint64_t span = c - g_anchor_cycles;
@@ -127,6 +152,16 @@ std::uint64_t rebase(Interval& iv) {
 }  // namespace
 
 namespace clock_detail {
+
+bool interval_agrees(std::uint64_t cycles0, std::uint64_t ns0, std::uint64_t mult, std::uint64_t cycles,
+                     std::uint64_t ns) {
+    if (cycles < cycles0 || ns < ns0) return false;
+    const unsigned __int128 span = ((unsigned __int128)(cycles - cycles0) * mult) >> 32;
+    const unsigned __int128 predicted = ns0 + span;
+    const std::uint64_t allowed = kIntervalDriftNs + (ns - ns0) / 1000;
+    const unsigned __int128 miss = predicted > ns ? predicted - ns : ns - predicted;
+    return miss <= allowed;
+}
 
 constinit __attribute__((tls_model("initial-exec"))) thread_local Interval t_iv;
 
@@ -151,8 +186,12 @@ std::uint64_t now_slow() {
         }
     }
     if (g_mode.load(std::memory_order_relaxed) == kUnknown) decide();
-#endif
+    // Never below a reading the counter gave before it was turned off.
+    const std::uint64_t m = monotonic(), last = t_iv.last;
+    return m < last ? last : m;
+#else
     return monotonic();
+#endif
 }
 
 }  // namespace clock_detail
@@ -163,8 +202,20 @@ std::uint64_t now_exact_ns() {
         Interval& iv = clock_detail::t_iv;
         if (!(iv.gen & 1)) return rebase(iv);
     }
-#endif
+    const std::uint64_t m = monotonic(), last = clock_detail::t_iv.last;
+    return m < last ? last : m;
+#else
     return monotonic();
+#endif
+}
+
+bool clock_extrapolates() {
+#if CHM_PORT_HAS_CYCLE_COUNTER
+    if (g_mode.load(std::memory_order_acquire) == kUnknown) (void)now_ns();
+    return g_mode.load(std::memory_order_acquire) == kCounter;
+#else
+    return false;
+#endif
 }
 
 }  // namespace chm::port

@@ -19,6 +19,14 @@ struct Interval {
 };
 extern constinit __attribute__((tls_model("initial-exec"))) thread_local Interval t_iv;
 
+// Whether an interval (its start `cycles0`, `ns0` and rate `mult`) still
+// held at a fresh pair (`cycles`, `ns`): its extrapolation within
+// kIntervalDriftNs + 1000 ppm of the span of the clock, the counter not
+// gone back. posix/clock.cpp turns the counter off when one did not.
+inline constexpr std::uint64_t kIntervalDriftNs = 50000;
+bool interval_agrees(std::uint64_t cycles0, std::uint64_t ns0, std::uint64_t mult, std::uint64_t cycles,
+                     std::uint64_t ns);
+
 // Everything else: no counter, a rebase due, a signal handler in the
 // middle of a rebase or one that rebased during this reading.
 std::uint64_t now_slow();

@@ -1,6 +1,8 @@
 // x86-64 inline pieces of the port contract (see ../port.hpp).
 #pragma once
 
+#include <cpuid.h>
+
 #include <cstdint>
 
 // This port implements the preemption trampoline (preempt.S).
@@ -32,6 +34,13 @@ __attribute__((always_inline)) inline void relax() { __builtin_ia32_pause(); }
 // accurate to tens of nanoseconds does not notice.
 #define CHM_PORT_HAS_CYCLE_COUNTER 1
 inline std::uint64_t cycle_counter() { return __builtin_ia32_rdtsc(); }
+// The processor says its counter keeps one rate through every power
+// state ("invariant TSC": CPUID 0x80000007, EDX bit 8). The clock asks it
+// where Linux keeps time with a hypervisor's clock built on the counter.
+inline bool cycle_counter_invariant() {
+    unsigned a = 0, b = 0, c = 0, d = 0;
+    return __get_cpuid(0x80000007, &a, &b, &c, &d) && (d & (1u << 8));
+}
 
 // Three conditional branches on the low bits of `key` (the incoming
 // task's slot), just before the switch: they put the incoming task into
