@@ -89,7 +89,7 @@ chm_tid_t spawn_fn(std::function<void()>* fn, const TaskSpec& t);
 // ---- the cycle clock
 
 // A cycle counter read inline, in the bench's own code. Two reasons: it is
-// cheaper than the vDSO clock (~45 ns on a kvm-clock guest), and code that
+// cheaper than the vDSO clock (~25 ns on a kvm-clock guest), and code that
 // waits to be preempted must not sit in the vDSO, where the kernel defers
 // preemption (it only preempts code of the main program).
 inline std::uint64_t ticks() {
