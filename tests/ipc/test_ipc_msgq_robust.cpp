@@ -224,12 +224,12 @@ void die_at(const bp::Attachment& a, QueueHeader* q, int point) {
         if (point >= kPutCommittedNotLinked) s->state = kSlotQueued;
         if (point >= kPutLinkedCountStale) {
             s->next = kNil;
-            slot_at(q, q->tail[0].load())->next = i;
-            q->tail[0] = i;
+            slot_at(q, q->tail(0).load())->next = i;
+            q->tail(0) = i;
         }
     } else if (point == kGetUnlinked || point == kGetReleasedNotFreed) {
-        const std::uint32_t i = q->head[0].load();
-        q->head[0] = slot_at(q, i)->next.load();
+        const std::uint32_t i = q->head(0).load();
+        q->head(0) = slot_at(q, i)->next.load();
         if (point == kGetReleasedNotFreed) slot_at(q, i)->state = kSlotFree;
     } else if (point == kWaiterCountStale) {
         Waiter* w = waiter_at(q, 0);

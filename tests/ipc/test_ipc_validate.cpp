@@ -257,10 +257,10 @@ TEST_F(IpcValidate, ACorruptObjectIsRefusedAtOpenNamingTheField) {
     constexpr std::uint32_t kNil = ipc::msgq::kNil;
     const Case cases[] = {
         {"queue free_head", kAtOpen, "free_head is 1000", [](const Image& i) { poke(i.queue()->free_head, 1000); }},
-        {"queue head", kAtOpen, "head[7] is 4096", [](const Image& i) { poke(i.queue()->head[7], 4096); }},
-        {"queue tail", kAtOpen, "tail[3] is 9", [](const Image& i) { poke(i.queue()->tail[3], 9); }},
+        {"queue head", kAtOpen, "head[7] is 4096", [](const Image& i) { poke(i.queue()->head(7), 4096); }},
+        {"queue tail", kAtOpen, "tail[3] is 9", [](const Image& i) { poke(i.queue()->tail(3), 9); }},
         {"queue list emptied, level_mask not", kAtOpen, "tail[7]",
-         [](const Image& i) { poke(i.queue()->tail[7], kNil); poke(i.queue()->head[7], kNil); }},
+         [](const Image& i) { poke(i.queue()->tail(7), kNil); poke(i.queue()->head(7), kNil); }},
         {"queue max_count 0", kAtOpen, "max_count is 0", [](const Image& i) { i.queue()->max_count = 0; }},
         {"queue max_count huge", kAtOpen, "max_count is", [](const Image& i) { i.queue()->max_count = 0x7FFFFFFF; }},
         {"queue max_msg 0", kAtOpen, "max_msg is 0", [](const Image& i) { i.queue()->max_msg = 0; }},
@@ -273,7 +273,7 @@ TEST_F(IpcValidate, ACorruptObjectIsRefusedAtOpenNamingTheField) {
         {"queue slot len", kAtOpen, "len 4000",
          [](const Image& i) {
              const QueueHeader* q = i.queue();
-             const std::uint32_t h = q->head[7].load();
+             const std::uint32_t h = q->head(7).load();
              auto* s = reinterpret_cast<ipc::msgq::MsgSlot*>(i.base + i.q_off + q->slots_off + h * q->slot_size);
              poke(s->len, 4000);
          }},
@@ -366,11 +366,11 @@ TEST_F(IpcValidate, TheDataPathBoundsWhatItReadsAfterTheOpen) {
     EXPECT_EQ(chm_msgq_try_send(q, 0, 1, &v, sizeof v), -EBADMSG);
     EXPECT_NE(std::string(chm_bp_last_error()).find("free_head is 4"), std::string::npos) << chm_bp_last_error();
     poke(h->free_head, fh);
-    const std::uint32_t hd = h->head[3].load();
-    poke(h->head[3], 0xFFFF0000u);
+    const std::uint32_t hd = h->head(3).load();
+    poke(h->head(3), 0xFFFF0000u);
     EXPECT_EQ(chm_msgq_try_receive(q, &v, sizeof v, nullptr), -EBADMSG);
     EXPECT_NE(std::string(chm_bp_last_error()).find("head[3] is 4294901760"), std::string::npos) << chm_bp_last_error();
-    poke(h->head[3], hd);
+    poke(h->head(3), hd);
     auto* s = reinterpret_cast<ipc::msgq::MsgSlot*>(reinterpret_cast<char*>(h) + sizeof(QueueHeader) + hd * 48);
     poke(s->len, 1u << 24);
     EXPECT_EQ(chm_msgq_try_receive(q, &v, sizeof v, nullptr), -EBADMSG);

@@ -34,8 +34,10 @@ inline constexpr std::uint32_t kMagicSwapped = 0x424D4843;  // other byte order
 // 3: remote semaphores 64-aligned, grant words apart; 4: a vacant slot's pid
 // word names its generation, the recoverer is one word, STALE mail records;
 // 5: 64-bit task ids in express-mail requests and replies (xmail.hpp), the
-// 32-bit task words here carry their 31-bit short form (kernel::tid_short).
-inline constexpr std::uint32_t kLayoutVersion = 5;
+// 32-bit task words here carry their 31-bit short form (kernel::tid_short);
+// 6: a message queue's header puts its lock, counters and level 0's list
+// in one cache line (msgq/msgq.hpp).
+inline constexpr std::uint32_t kLayoutVersion = 6;
 inline constexpr std::uint32_t kPage = 4096;
 inline constexpr std::uint32_t kMaxSlots = 32;   // attach masks are uint32_t
 inline constexpr std::uint32_t kMinSlots = 2;

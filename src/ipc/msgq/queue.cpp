@@ -55,7 +55,7 @@ int put_locked(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t se
                std::uint32_t prio, const void* data, std::uint32_t len) {
     const std::uint32_t i = q->free_head.load(R);
     const std::uint32_t l = level_of(g, prio);
-    const std::uint32_t t = q->tail[l].load(R);
+    const std::uint32_t t = q->tail(l).load(R);
     if (i >= g.max_count || (t != kNil && t >= g.max_count)) [[unlikely]] {
         set_corrupt(v, q, i >= g.max_count ? "free_head is %u, outside its %u slots" : "tail is %u, outside its %u slots",
                     i >= g.max_count ? i : t, g.max_count);
@@ -76,14 +76,14 @@ int put_locked(const bp::View& v, QueueHeader* q, const Geo& g, std::uint32_t se
     if (len) std::memcpy(payload_of(s), data, len);
     s->state.store(kSlotQueued, std::memory_order_release);  // committed
     if (g.order == kLifo) {
-        s->next.store(q->head[l].load(R), R);
-        if (q->head[l].load(R) == kNil) q->tail[l].store(i, R);
-        q->head[l].store(i, R);
+        s->next.store(q->head(l).load(R), R);
+        if (q->head(l).load(R) == kNil) q->tail(l).store(i, R);
+        q->head(l).store(i, R);
     } else {
         s->next.store(kNil, R);
-        if (t == kNil) q->head[l].store(i, R);
+        if (t == kNil) q->head(l).store(i, R);
         else slot_at(q, g, t)->next.store(i, R);
-        q->tail[l].store(i, R);
+        q->tail(l).store(i, R);
     }
     set_bits(q->level_mask, 1u << l);
     bump(q->count, 1);
@@ -98,7 +98,7 @@ std::uint32_t next_index(const QueueHeader* q, const Geo& g, std::uint32_t* leve
     // mask | 1: a corrupt empty mask gives level 0, whose head is bounded.
     const std::uint32_t l = g.order == kPriority ? 31u - std::uint32_t(__builtin_clz(mask | 1u)) : 0u;
     *level = l;
-    return q->head[l].load(R);
+    return q->head(l).load(R);
 }
 
 void fill_info(MsgSlot* s, chm_msgq_msg_info_t* info) {
@@ -127,9 +127,9 @@ int get_locked(const bp::View& v, QueueHeader* q, const Geo& g, void* buf, std::
     fill_info(s, info);
     if (len > size) return -EMSGSIZE;
     const std::uint32_t next = s->next.load(R);
-    q->head[l].store(next, R);
+    q->head(l).store(next, R);
     if (next == kNil) {
-        q->tail[l].store(kNil, R);
+        q->tail(l).store(kNil, R);
         clear_bits(q->level_mask, 1u << l);
     }
     CHM_STOP_POINT("msgq.receive.copy");

@@ -99,8 +99,8 @@ void queue_init(QueueHeader* q, std::uint32_t order, std::uint32_t max_msg, std:
     q->waiters_off = q->slots_off + max_count * q->slot_size;
     q->total_size = queue_size(max_msg, max_count, max_waiters);
     for (std::uint32_t l = 0; l < kLevels; ++l) {
-        q->head[l].store(kNil, R);
-        q->tail[l].store(kNil, R);
+        q->head(l).store(kNil, R);
+        q->tail(l).store(kNil, R);
     }
     const Geo g{order, max_msg, max_count, max_bytes, q->slot_size, max_waiters, q->slots_off, q->waiters_off};
     for (std::uint32_t i = 0; i < max_count; ++i) {
@@ -142,8 +142,8 @@ bool rebuild_locked(QueueHeader* q, const Geo& g) {
     const Age age{g, q->next_seq.load(R), g.order == kLifo};
     for (std::uint32_t l = 0; l < kLevels; ++l) {
         std::uint32_t tail;
-        q->head[l].store(sort_list(q, heads[l], age, &tail), R);
-        q->tail[l].store(tail, R);
+        q->head(l).store(sort_list(q, heads[l], age, &tail), R);
+        q->tail(l).store(tail, R);
     }
     q->free_head.store(free_head, R);
     q->level_mask.store(mask, R);
@@ -228,7 +228,7 @@ void check_queue(const bp::View& v, const QueueHeader* cq, std::uint32_t payload
     const Age age{g, q->next_seq.load(R), g.order == kLifo};
     std::uint32_t seen = 0, bytes = 0, mask = 0;
     for (std::uint32_t l = 0; l < kLevels; ++l) {
-        std::uint32_t i = q->head[l].load(R), last = kNil, steps = 0;
+        std::uint32_t i = q->head(l).load(R), last = kNil, steps = 0;
         if (i != kNil) mask |= 1u << l;
         for (; i != kNil; i = slot_at(q, g, i)->next.load(R)) {
             if (i >= g.max_count || ++steps > g.max_count)
@@ -240,7 +240,7 @@ void check_queue(const bp::View& v, const QueueHeader* cq, std::uint32_t payload
             bytes += s->len.load(R);
             last = i;
         }
-        if (q->tail[l].load(R) != last) rep.problem("%s: tail of list %u is %u, the list ends at %u", name, l, q->tail[l].load(R), last);
+        if (q->tail(l).load(R) != last) rep.problem("%s: tail of list %u is %u, the list ends at %u", name, l, q->tail(l).load(R), last);
         seen += steps;
     }
     std::uint32_t queued = 0, free_slots = 0;

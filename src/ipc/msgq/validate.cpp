@@ -68,7 +68,7 @@ int validate_locked(QueueHeader* q, const Geo& g, char* why, std::size_t n) {
     if (g.order != kPriority && (mask & ~1u)) return corrupt(why, n, "level_mask 0x%08x: only level 0 is used", mask);
     std::uint32_t queued = 0;
     for (std::uint32_t l = 0; l < kLevels; ++l) {
-        const std::uint32_t h = q->head[l].load(R), t = q->tail[l].load(R);
+        const std::uint32_t h = q->head(l).load(R), t = q->tail(l).load(R);
         if (!index_ok(h, g)) return corrupt(why, n, "head[%u] is %u, outside its %u slots", l, h, g.max_count);
         if (!index_ok(t, g)) return corrupt(why, n, "tail[%u] is %u, outside its %u slots", l, t, g.max_count);
         if ((h == kNil) != (t == kNil) || (h != kNil) != ((mask >> l) & 1))
