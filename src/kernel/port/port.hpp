@@ -142,6 +142,9 @@ std::uint64_t now_exact_ns();
 // (decided at the first reading, which this makes if none was made yet;
 // false for good once an interval missed the clock: posix/clock.cpp).
 bool clock_extrapolates();
+// Whether this process turned the counter off; then the interval that
+// missed: by how much, and how long it was (either may be null).
+bool clock_counter_dropped(std::uint64_t* miss_ns, std::uint64_t* span_ns);
 
 // ------------------------------------------------------ the interrupt mask
 

@@ -57,6 +57,8 @@ std::atomic<int> g_mode{kUnknown};
 // written once before g_mode turns kCounter, read-only afterwards.
 std::uint64_t g_anchor_cycles, g_anchor_ns, g_rebase_cycles;
 unsigned __int128 g_first_mult;  // ns per cycle << 32, from the calibration
+// Why the counter was turned off, if it was (clock_counter_dropped).
+std::atomic<std::uint64_t> g_dropped_miss_ns{0}, g_dropped_span_ns{0};
 
 // Per thread (clock_fast.hpp): the interval now_ns() extrapolates from.
 using clock_detail::Interval;
@@ -114,6 +116,28 @@ void decide() {
     g_mode.store(kCounter, std::memory_order_release);
 }
 
+// One line on stderr when the counter is turned off, with write(2): the
+// rebase may run in the timer's signal handler.
+void say_dropped(std::uint64_t miss_ns, std::uint64_t span_ns) {
+    char buf[160];
+    std::size_t n = 0;
+    const auto put = [&](const char* s) {
+        while (*s && n < sizeof buf) buf[n++] = *s++;
+    };
+    const auto num = [&](std::uint64_t v) {
+        char d[24];
+        int k = 0;
+        do d[k++] = char('0' + v % 10); while ((v /= 10) && k < 24);
+        while (k && n < sizeof buf) buf[n++] = d[--k];
+    };
+    put("chimera: clock: the cycle counter missed CLOCK_MONOTONIC by ");
+    num(miss_ns / 1000);
+    put(" us over ");
+    num(span_ns / 1000);
+    put(" us; this process reads CLOCK_MONOTONIC from now on\n");
+    (void)!::write(2, buf, n);
+}
+
 // A new interval for this thread from a fresh CLOCK_MONOTONIC reading; the
 // rate from the whole span since the anchor (better with every rebase).
 // No clean pair (the thread kept being interrupted): the clock itself,
@@ -124,7 +148,10 @@ std::uint64_t rebase(Interval& iv) {
     if (iv.limit && !clock_detail::interval_agrees(iv.cycles, iv.ns, iv.mult, c, n)) [[unlikely]] {
         // Moved to another host, or a counter the host does not keep in
         // step: the clock alone from now on, never below what was read.
-        g_mode.store(kVdso, std::memory_order_release);
+        g_dropped_miss_ns.store(clock_detail::interval_miss(iv.cycles, iv.ns, iv.mult, c, n), std::memory_order_relaxed);
+        g_dropped_span_ns.store(n - iv.ns, std::memory_order_relaxed);
+        if (g_mode.exchange(kVdso, std::memory_order_acq_rel) == kCounter)
+            say_dropped(g_dropped_miss_ns.load(std::memory_order_relaxed), n - iv.ns);
         ++iv.gen;
         __atomic_signal_fence(__ATOMIC_SEQ_CST);
         iv.limit = 0;
@@ -153,14 +180,21 @@ std::uint64_t rebase(Interval& iv) {
 
 namespace clock_detail {
 
+std::uint64_t interval_miss(std::uint64_t cycles0, std::uint64_t ns0, std::uint64_t mult, std::uint64_t cycles,
+                            std::uint64_t ns) {
+    // A counter read a little behind the interval's start (another CPU's,
+    // a few cycles apart) predicts the start itself.
+    const unsigned __int128 span =
+        cycles > cycles0 ? ((unsigned __int128)(cycles - cycles0) * mult) >> 32 : 0;
+    const unsigned __int128 predicted = ns0 + span;
+    const unsigned __int128 miss = predicted > ns ? predicted - ns : ns - predicted;
+    return miss > UINT64_MAX ? UINT64_MAX : std::uint64_t(miss);
+}
+
 bool interval_agrees(std::uint64_t cycles0, std::uint64_t ns0, std::uint64_t mult, std::uint64_t cycles,
                      std::uint64_t ns) {
-    if (cycles < cycles0 || ns < ns0) return false;
-    const unsigned __int128 span = ((unsigned __int128)(cycles - cycles0) * mult) >> 32;
-    const unsigned __int128 predicted = ns0 + span;
-    const std::uint64_t allowed = kIntervalDriftNs + (ns - ns0) / 1000;
-    const unsigned __int128 miss = predicted > ns ? predicted - ns : ns - predicted;
-    return miss <= allowed;
+    if (ns < ns0) return false;
+    return interval_miss(cycles0, ns0, mult, cycles, ns) <= kIntervalDriftNs + (ns - ns0) / 1000;
 }
 
 constinit __attribute__((tls_model("initial-exec"))) thread_local Interval t_iv;
@@ -206,6 +240,20 @@ std::uint64_t now_exact_ns() {
     return m < last ? last : m;
 #else
     return monotonic();
+#endif
+}
+
+bool clock_counter_dropped(std::uint64_t* miss_ns, std::uint64_t* span_ns) {
+#if CHM_PORT_HAS_CYCLE_COUNTER
+    const std::uint64_t span = g_dropped_span_ns.load(std::memory_order_relaxed);
+    if (!span && !g_dropped_miss_ns.load(std::memory_order_relaxed)) return false;
+    if (miss_ns) *miss_ns = g_dropped_miss_ns.load(std::memory_order_relaxed);
+    if (span_ns) *span_ns = span;
+    return true;
+#else
+    (void)miss_ns;
+    (void)span_ns;
+    return false;
 #endif
 }
 

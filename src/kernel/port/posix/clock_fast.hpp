@@ -26,6 +26,9 @@ extern constinit __attribute__((tls_model("initial-exec"))) thread_local Interva
 inline constexpr std::uint64_t kIntervalDriftNs = 50000;
 bool interval_agrees(std::uint64_t cycles0, std::uint64_t ns0, std::uint64_t mult, std::uint64_t cycles,
                      std::uint64_t ns);
+// By how much the interval's extrapolation missed `ns` at `cycles`.
+std::uint64_t interval_miss(std::uint64_t cycles0, std::uint64_t ns0, std::uint64_t mult, std::uint64_t cycles,
+                            std::uint64_t ns);
 
 // Everything else: no counter, a rebase due, a signal handler in the
 // middle of a rebase or one that rebased during this reading.
