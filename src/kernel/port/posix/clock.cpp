@@ -15,9 +15,11 @@
 // the processor says the counter is invariant; such guests are often told
 // "tsc=unstable" only because they may be moved to another host, so every
 // rebase checks the interval it ends: a thread's extrapolation that missed
-// the fresh reading by more than kIntervalDriftNs (+ 1000 ppm of the interval), or
-// a counter that went back, turns the counter off for the process for good
-// (readings still never go back). now_exact_ns() reads CLOCK_MONOTONIC and
+// the fresh reading by more than kIntervalDriftNs + 1000 ppm of the
+// interval (a counter gone back counts as predicting the interval's start)
+// turns the counter off for the process for good, with one line on stderr
+// (readings still never go back; other threads' intervals run out within
+// kRebaseNs). now_exact_ns() reads CLOCK_MONOTONIC and
 // starts a new interval: the timer paths use it, so an expiry is never
 // judged against a reading that trails the clock that fired it. Elsewhere
 // (no counter, another clocksource, CHIMERA_CLOCK=vdso) both are

@@ -21,8 +21,9 @@ extern constinit __attribute__((tls_model("initial-exec"))) thread_local Interva
 
 // Whether an interval (its start `cycles0`, `ns0` and rate `mult`) still
 // held at a fresh pair (`cycles`, `ns`): its extrapolation within
-// kIntervalDriftNs + 1000 ppm of the span of the clock, the counter not
-// gone back. posix/clock.cpp turns the counter off when one did not.
+// kIntervalDriftNs + 1000 ppm of the span of the clock (a counter behind
+// `cycles0` predicts `ns0`). posix/clock.cpp turns the counter off when
+// one did not.
 inline constexpr std::uint64_t kIntervalDriftNs = 50000;
 bool interval_agrees(std::uint64_t cycles0, std::uint64_t ns0, std::uint64_t mult, std::uint64_t cycles,
                      std::uint64_t ns);
