@@ -182,15 +182,30 @@ std::uint64_t rebase(Interval& iv) {
 
 namespace clock_detail {
 
+namespace {
+// (d x m) >> 32, saturated at UINT64_MAX, in 64-bit arithmetic (a 32-bit
+// port has no 128-bit integers; the check is unit-tested on every port).
+std::uint64_t mul_shift32_sat(std::uint64_t d, std::uint64_t m) {
+    constexpr std::uint64_t kLow = 0xffffffffu;
+    const std::uint64_t dh = d >> 32, dl = d & kLow, mh = m >> 32, ml = m & kLow;
+    std::uint64_t r = (dl * ml) >> 32, hi = 0;
+    if (dh * mh > kLow) return UINT64_MAX;
+    hi = (dh * mh) << 32;
+    if (__builtin_add_overflow(r, hi, &r) || __builtin_add_overflow(r, dh * ml, &r) ||
+        __builtin_add_overflow(r, dl * mh, &r))
+        return UINT64_MAX;
+    return r;
+}
+}  // namespace
+
 std::uint64_t interval_miss(std::uint64_t cycles0, std::uint64_t ns0, std::uint64_t mult, std::uint64_t cycles,
                             std::uint64_t ns) {
     // A counter read a little behind the interval's start (another CPU's,
     // a few cycles apart) predicts the start itself.
-    const unsigned __int128 span =
-        cycles > cycles0 ? ((unsigned __int128)(cycles - cycles0) * mult) >> 32 : 0;
-    const unsigned __int128 predicted = ns0 + span;
-    const unsigned __int128 miss = predicted > ns ? predicted - ns : ns - predicted;
-    return miss > UINT64_MAX ? UINT64_MAX : std::uint64_t(miss);
+    const std::uint64_t span = cycles > cycles0 ? mul_shift32_sat(cycles - cycles0, mult) : 0;
+    std::uint64_t predicted;
+    if (__builtin_add_overflow(ns0, span, &predicted)) predicted = UINT64_MAX;
+    return predicted > ns ? predicted - ns : ns - predicted;
 }
 
 bool interval_agrees(std::uint64_t cycles0, std::uint64_t ns0, std::uint64_t mult, std::uint64_t cycles,
