@@ -6,6 +6,7 @@
 #include <cstring>
 
 #include "ipc/backplane/backplane.hpp"
+#include "ipc/backplane/stop_point.hpp"
 #include "ipc/xmail/xmail.hpp"
 
 namespace chm::bp {
@@ -41,44 +42,91 @@ void check_ring_records(const View& v, std::uint32_t s, Report& r) {
     }
 }
 
+// One slot's words as of one instant. A checker runs beside live
+// processes: a slot that joins, leaves or is recovered while its words are
+// read could pair a status with another status's pid or recoverer. Each
+// of those changes moves the status word before the words it then writes
+// (the pid is named after the JOINING CAS, vacated after the LEAVING or
+// RECOVERING CAS, the recoverer cleared after the DEAD CAS), so words read
+// between two equal readings of the status belong to that status.
+struct SlotWords {
+    std::uint32_t status, kind, pid, recoverer;
+    std::uint64_t pid_start;
+};
+
+bool read_slot(const RtpuEntry* e, SlotWords* w) {
+    constexpr auto A = std::memory_order_acquire;
+    for (int attempt = 0; attempt < 64; ++attempt) {
+        w->status = e->status.load(A);
+        if (status_state(w->status) == SlotState::Recovering) CHM_STOP_POINT("bp.check.read_recovering");
+        w->kind = e->kind.load(A);
+        w->pid = e->pid.load(A);
+        w->pid_start = e->pid_start.load();
+        w->recoverer = e->recoverer.load(A);
+        if (e->status.load(A) == w->status) return true;
+    }
+    return false;  // changing all the time: a live slot, judged at the next check
+}
+
+// The pid word a slot in `state` (generation gen) may hold at one instant,
+// besides a live process (layout.hpp, "the pid word"): a joiner that has
+// not named itself yet holds the previous generation's vacancy (0 in a new
+// file), one given up by a judge this generation's; a leaver vacates its
+// generation before the slot is FREE.
+bool pid_between_steps(SlotState state, std::uint32_t gen, std::uint32_t pid) {
+    const std::uint32_t prev = (gen - 1) & 0xFFFFFF;
+    switch (state) {
+    case SlotState::Joining: return pid == vacant_pid(gen) || pid == vacant_pid(prev) || (pid == 0 && prev == 0);
+    case SlotState::Leaving: return pid == vacant_pid(gen);
+    default: return false;
+    }
+}
+
+void check_slot(std::uint32_t s, const SlotWords& w, Report& r, Summary* sum) {
+    const std::uint32_t state = w.status & 0xFF, gen = status_gen(w.status);
+    if (state >= kStateCount) {
+        r.problem("rtpu[%u].status: state %u is not a slot state", s, state);
+        return;
+    }
+    if (w.kind > std::uint32_t(SlotKind::Host)) r.problem("rtpu[%u].kind is %u, not RTPU or HOST", s, w.kind);
+    switch (static_cast<SlotState>(state)) {
+    case SlotState::Joining:
+    case SlotState::Running:
+    case SlotState::Leaving:
+        if (w.kind == std::uint32_t(SlotKind::Host)) ++sum->hosts; else ++sum->rtpus;
+        if (pid_between_steps(static_cast<SlotState>(state), gen, w.pid)) break;
+        if (!pid_named(w.pid)) r.problem("rtpu[%u]: %s without a pid (pid word %#x)", s, state_name(state), w.pid);
+        else if (!proc_alive(int(w.pid), w.pid_start))
+            r.problem("rtpu[%u]: %s but process %u is dead (not recovered yet)", s, state_name(state), w.pid);
+        break;
+    case SlotState::Recovering:
+        ++sum->dead;
+        if (w.recoverer == 0)
+            r.problem("rtpu[%u]: RECOVERING with no recoverer (an attempt ran out of time: the next survivor "
+                      "to look takes it over)", s);
+        else if (!recoverer_alive(w.recoverer))
+            r.problem("rtpu[%u]: RECOVERING but its recoverer (process %u) is dead (not taken over yet)", s,
+                      recoverer_pid_of(w.recoverer));
+        break;
+    case SlotState::Dead:
+        ++sum->dead;
+        [[fallthrough]];
+    case SlotState::Free:
+        // A vacancy names its generation (layout.hpp); 0 only in a new file.
+        if (w.pid != vacant_pid(gen) && !(w.pid == 0 && gen == 0))
+            r.problem("rtpu[%u]: %s (generation %u) but the pid word is %#x, not its vacancy", s,
+                      state_name(state), gen, w.pid);
+        break;
+    }
+}
+
 void check_table(const View& v, Report& r, Summary* sum) {
     char what[64];
     for (std::uint32_t s = 0; s < v.slots(); ++s) {
         const RtpuEntry* e = v.rtpu(s);
-        const std::uint32_t st = e->status.load(R);
-        const std::uint32_t state = st & 0xFF, kind = e->kind.load(R);
-        const std::uint32_t pid = e->pid.load(R), gen = status_gen(st);
-        if (state >= kStateCount) {
-            r.problem("rtpu[%u].status: state %u is not a slot state", s, state);
-            continue;
-        }
-        if (kind > std::uint32_t(SlotKind::Host)) r.problem("rtpu[%u].kind is %u, not RTPU or HOST", s, kind);
         if (!std::memchr(e->name, 0, sizeof e->name)) r.problem("rtpu[%u].name is not NUL-terminated", s);
-        switch (static_cast<SlotState>(state)) {
-        case SlotState::Joining:
-        case SlotState::Running:
-        case SlotState::Leaving:
-            if (!pid_named(pid)) r.problem("rtpu[%u]: %s without a pid (pid word %#x)", s, state_name(state), pid);
-            else if (!proc_alive(int(pid), e->pid_start.load()))
-                r.problem("rtpu[%u]: %s but process %u is dead (not recovered yet)", s, state_name(state), pid);
-            if (kind == std::uint32_t(SlotKind::Host)) ++sum->hosts; else ++sum->rtpus;
-            break;
-        case SlotState::Recovering:
-            if (!recoverer_alive(e->recoverer.load(R)))
-                r.problem("rtpu[%u]: RECOVERING but its recoverer (process %u) is dead", s,
-                          recoverer_pid_of(e->recoverer.load(R)));
-            ++sum->dead;
-            break;
-        case SlotState::Dead:
-            ++sum->dead;
-            [[fallthrough]];
-        case SlotState::Free:
-            // A vacancy names its generation (layout.hpp); 0 only in a new file.
-            if (pid != vacant_pid(gen) && !(pid == 0 && gen == 0))
-                r.problem("rtpu[%u]: %s (generation %u) but the pid word is %#x, not its vacancy", s,
-                          state_name(state), gen, pid);
-            break;
-        }
+        SlotWords w;
+        if (read_slot(e, &w)) check_slot(s, w, r, sum);
         const RingHeader* ring = v.ring(s);
         if (ring->capacity != v.geo().ring_records || ring->record_size != v.geo().ring_record_size)
             r.problem("ring[%u]: capacity %u x %u bytes, the header says %u x %u", s, ring->capacity, ring->record_size,

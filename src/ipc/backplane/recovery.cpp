@@ -196,6 +196,7 @@ bool recover_slot(const View& v, std::uint32_t slot, std::uint32_t gen) {
                                                std::memory_order_acq_rel);
     }
     if (go) {
+        CHM_STOP_POINT("bp.recover.recovering");  // the slot RECOVERING, this process its recoverer
         // Bounded: a live process holding a lock the recovery needs (it
         // stalled inside a call) holds it up at most this long, then it is
         // left to the next survivor (do_recover).
