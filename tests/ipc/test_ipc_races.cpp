@@ -448,5 +448,33 @@ TEST_F(IpcRaces, ARecoveryFinishingWhileTheCheckerReadsTheSlotIsNotAProblem) {
     EXPECT_EQ(reap(heir), 0);
 }
 
+// A joiner between its status CAS and its naming CAS holds the previous
+// generation's vacancy in the pid word: a step of the protocol (the judges
+// give it up only after kUnnamedConfirmMs), which the checker reported as
+// "JOINING without a pid".
+TEST_F(IpcRaces, AJoinerNotNamedYetIsNoProblemToTheChecker) {
+    create();
+    const pid_t joiner = spawn([&] {
+        stop_at("bp.take_slot.before_name");
+        return chm_bp_join(path_.c_str(), 1, "joiner") == 0 && chm_bp_leave() == 0 ? 0 : 1;
+    });
+    ASSERT_TRUE(wait_stopped(joiner));  // slot 1 JOINING, its pid word a vacancy
+    bp::View v;
+    int fd = -1;
+    char why[320];
+    ASSERT_EQ(bp::map_file(path_.c_str(), false, &v, &fd, why, sizeof why, false), 0) << why;
+    std::string lines;
+    bp::Report rep;
+    rep.emit = report_lines;
+    rep.ctx = &lines;
+    bp::check_backplane(v, rep, nullptr);
+    EXPECT_TRUE(bp::status_state(v.rtpu(1)->status.load()) == bp::SlotState::Joining);
+    EXPECT_EQ(lines, "") << "an unnamed joiner, a step of the protocol, was reported as a problem";
+    bp::unmap(&v);
+    ::close(fd);
+    kill(joiner, SIGCONT);
+    EXPECT_EQ(reap(joiner), 0);
+}
+
 }  // namespace
 }  // namespace chm::test
