@@ -116,6 +116,24 @@ inline std::string check_now() {
     return out;
 }
 
+// check_backplane on the file at `path`, mapped read-only without
+// attaching (as chimera-bpcheck does): "" when consistent.
+inline std::string check_file(const std::string& path) {
+    bp::View v;
+    int fd = -1;
+    char why[320];
+    if (bp::map_file(path.c_str(), false, &v, &fd, why, sizeof why, false) != 0)
+        return std::string("unreadable: ") + why + "\n";
+    std::string out;
+    bp::Report r;
+    r.emit = report_lines;
+    r.ctx = &out;
+    bp::check_backplane(v, r, nullptr);
+    bp::unmap(&v);
+    ::close(fd);
+    return out;
+}
+
 class IpcTest : public ::testing::Test {
 protected:
     void SetUp() override {

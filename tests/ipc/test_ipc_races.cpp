@@ -29,6 +29,18 @@ protected:
     // holder's identity intact, with `recoveries` recoveries counted and the
     // checker clean.
     void stalled_joiner_loses(const char* point, std::uint64_t recoveries);
+    // A process joins `slot` and is killed there: a death to recover.
+    void kill_holder_of(int slot) {
+        Pipe victim_ready;
+        const pid_t victim = spawn([&] {
+            if (chm_bp_join(path_.c_str(), slot, "victim") != 0) return 1;
+            victim_ready.put('r');
+            pause();
+            return 0;
+        });
+        ASSERT_EQ(victim_ready.get(), 'r');
+        kill9(victim);
+    }
 };
 
 // Wait (bounded) until no slot names process p: it left, or its death
@@ -122,15 +134,7 @@ TEST_F(IpcRaces, AJoinerKilledBeforeNamingItselfIsRecovered) {
 // again and overwrote the slot (DEAD) under the second, which had joined.
 TEST_F(IpcRaces, TwoRecoverersNeverRecoverTheSameDeathAtOnce) {
     create();
-    Pipe victim_ready;
-    const pid_t victim = spawn([&] {
-        if (chm_bp_join(path_.c_str(), 1, "victim") != 0) return 1;
-        victim_ready.put('r');
-        pause();
-        return 0;
-    });
-    ASSERT_EQ(victim_ready.get(), 'r');
-    kill9(victim);
+    ASSERT_NO_FATAL_FAILURE(kill_holder_of(1));
 
     Pipe said1, said2, go;
     auto joiner = [&](const char* name, Pipe& said, const char* point) {
@@ -167,15 +171,7 @@ TEST_F(IpcRaces, TwoRecoverersNeverRecoverTheSameDeathAtOnce) {
 // process's monitor) takes the recovery over, exactly once.
 TEST_F(IpcRaces, ARecovererKilledAfterWinningIsTakenOver) {
     create();
-    Pipe victim_ready;
-    const pid_t victim = spawn([&] {
-        if (chm_bp_join(path_.c_str(), 1, "victim") != 0) return 1;
-        victim_ready.put('r');
-        pause();
-        return 0;
-    });
-    ASSERT_EQ(victim_ready.get(), 'r');
-    kill9(victim);
+    ASSERT_NO_FATAL_FAILURE(kill_holder_of(1));
     const pid_t first = spawn([&] {
         stop_at("bp.recover.won");
         return chm_bp_join(path_.c_str(), 1, "first") == 0 ? 0 : 1;
@@ -401,15 +397,7 @@ TEST_F(IpcRaces, AReceiverRegisteringDuringTheCheckersWalkIsNotCorruption) {
 // status.
 TEST_F(IpcRaces, ARecoveryFinishingWhileTheCheckerReadsTheSlotIsNotAProblem) {
     create();
-    Pipe victim_ready;
-    const pid_t victim = spawn([&] {
-        if (chm_bp_join(path_.c_str(), 1, "victim") != 0) return 1;
-        victim_ready.put('r');
-        pause();
-        return 0;
-    });
-    ASSERT_EQ(victim_ready.get(), 'r');
-    kill9(victim);
+    ASSERT_NO_FATAL_FAILURE(kill_holder_of(1));
     Pipe heir_said, heir_go;
     const pid_t heir = spawn([&] {  // recovers slot 1, then takes it
         stop_at("bp.recover.recovering");
@@ -422,19 +410,9 @@ TEST_F(IpcRaces, ARecoveryFinishingWhileTheCheckerReadsTheSlotIsNotAProblem) {
     Pipe checker_said;
     const pid_t checker = spawn([&] {
         stop_at("bp.check.read_recovering");
-        bp::View v;
-        int fd = -1;
-        char why[320];
-        if (bp::map_file(path_.c_str(), false, &v, &fd, why, sizeof why, false) != 0) return 1;
-        std::string lines;
-        bp::Report rep;
-        rep.emit = report_lines;
-        rep.ctx = &lines;
-        bp::check_backplane(v, rep, nullptr);
+        const std::string lines = check_file(path_);
         if (!lines.empty()) std::fprintf(stderr, "checker:\n%s", lines.c_str());
         checker_said.put(lines.empty() ? 'O' : 'C');
-        bp::unmap(&v);
-        ::close(fd);
         return 0;
     });
     ASSERT_TRUE(wait_stopped(checker));  // it read slot 1's status: RECOVERING
@@ -463,15 +441,10 @@ TEST_F(IpcRaces, AJoinerNotNamedYetIsNoProblemToTheChecker) {
     int fd = -1;
     char why[320];
     ASSERT_EQ(bp::map_file(path_.c_str(), false, &v, &fd, why, sizeof why, false), 0) << why;
-    std::string lines;
-    bp::Report rep;
-    rep.emit = report_lines;
-    rep.ctx = &lines;
-    bp::check_backplane(v, rep, nullptr);
     EXPECT_TRUE(bp::status_state(v.rtpu(1)->status.load()) == bp::SlotState::Joining);
-    EXPECT_EQ(lines, "") << "an unnamed joiner, a step of the protocol, was reported as a problem";
     bp::unmap(&v);
     ::close(fd);
+    EXPECT_EQ(check_file(path_), "") << "an unnamed joiner, a step of the protocol, was reported as a problem";
     kill(joiner, SIGCONT);
     EXPECT_EQ(reap(joiner), 0);
 }

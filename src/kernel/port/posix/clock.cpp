@@ -150,10 +150,10 @@ std::uint64_t rebase(Interval& iv) {
     if (iv.limit && !clock_detail::interval_agrees(iv.cycles, iv.ns, iv.mult, c, n)) [[unlikely]] {
         // Moved to another host, or a counter the host does not keep in
         // step: the clock alone from now on, never below what was read.
-        g_dropped_miss_ns.store(clock_detail::interval_miss(iv.cycles, iv.ns, iv.mult, c, n), std::memory_order_relaxed);
-        g_dropped_span_ns.store(n - iv.ns, std::memory_order_relaxed);
-        if (g_mode.exchange(kVdso, std::memory_order_acq_rel) == kCounter)
-            say_dropped(g_dropped_miss_ns.load(std::memory_order_relaxed), n - iv.ns);
+        const std::uint64_t miss = clock_detail::interval_miss(iv.cycles, iv.ns, iv.mult, c, n), span = n - iv.ns;
+        g_dropped_miss_ns.store(miss, std::memory_order_relaxed);
+        g_dropped_span_ns.store(span, std::memory_order_relaxed);
+        if (g_mode.exchange(kVdso, std::memory_order_acq_rel) == kCounter) say_dropped(miss, span);
         ++iv.gen;
         __atomic_signal_fence(__ATOMIC_SEQ_CST);
         iv.limit = 0;
