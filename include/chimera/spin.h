@@ -30,9 +30,19 @@
 extern "C" {
 #endif
 
-/* Lives in shared memory; 16 bytes, 4-byte aligned. Initialise with
- * chm_spin_init before first use; never copy a lock that may be held. */
-typedef struct chm_spin {
+/* The lock's alignment on every target. m68k's ABI aligns a uint32_t to 2
+ * bytes only, so without it a chm_spin_t on the stack or in a struct could
+ * land on an address the lock's atomic word refuses (-EINVAL). */
+#if defined(__GNUC__) || defined(__clang__)
+#define CHM_SPIN_ALIGNED __attribute__((aligned(4)))
+#else
+#define CHM_SPIN_ALIGNED
+#endif
+
+/* Lives in shared memory; 16 bytes, 4-byte aligned (also on m68k, where the
+ * type says so: CHM_SPIN_ALIGNED). Initialise with chm_spin_init before
+ * first use; never copy a lock that may be held. */
+typedef struct CHM_SPIN_ALIGNED chm_spin {
     uint32_t word;        /* holder's token: 0 = free */
     uint32_t owner_task;  /* holder's task id in 31 bits (its slot, bits 0..15, and its
                            * generation folded into 1..0x7fff), or 0x80000000 | thread id */

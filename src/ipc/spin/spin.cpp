@@ -12,6 +12,7 @@
 using namespace chm::bp;
 
 static_assert(sizeof(chm_spin_t) == sizeof(Lock));
+static_assert(alignof(chm_spin_t) >= alignof(A32), "a chm_spin_t anywhere is a valid lock (m68k: chimera/spin.h)");
 static_assert(offsetof(chm_spin_t, word) == offsetof(Lock, token));
 static_assert(offsetof(chm_spin_t, owner_task) == offsetof(Lock, owner_task));
 static_assert(offsetof(chm_spin_t, dirty) == offsetof(Lock, dirty));
