@@ -136,15 +136,10 @@ build-aarch64/build.ninja:
 # Under qemu: the port, kernel, backplane and other suites that say so
 # (suite m68k / aarch64). Only what those tests need is cross-compiled
 # (the benchmark, tools and examples are not run there).
-test-m68k: deps deps-cross build-m68k/build.ninja
-	ninja -C build-m68k build.ninja
-	ninja -C build-m68k $$(python3 tools/check/suite_targets.py build-m68k m68k)
-	$(MESON_TEST) -C build-m68k --no-rebuild --suite m68k
-
-test-aarch64: deps deps-cross build-aarch64/build.ninja
-	ninja -C build-aarch64 build.ninja
-	ninja -C build-aarch64 $$(python3 tools/check/suite_targets.py build-aarch64 aarch64)
-	$(MESON_TEST) -C build-aarch64 --no-rebuild --suite aarch64
+test-m68k test-aarch64: test-%: deps deps-cross build-%/build.ninja
+	ninja -C build-$* build.ninja
+	ninja -C build-$* $$(python3 tools/check/suite_targets.py build-$* $*)
+	$(MESON_TEST) -C build-$* --no-rebuild --suite $*
 
 # The libFuzzer harnesses (tests/fuzz, issue 15 item 4) in their own clang
 # build, so the gcc builds above are untouched. Only the harnesses are
