@@ -116,9 +116,10 @@ CHM_CHECK int chm_svar_info_at(int index, chm_svar_info_t* out);
 /* Copy the current value of `name` into buf (`size` >= its bytes): one
  * consistent value, as chm_svar_set_read gives. For monitoring and
  * one-off reads; a periodic task uses a set. Errors: -EINVAL NULL
- * argument; -EMSGSIZE size smaller than the value; -ENOENT; -EAGAIN the
- * value changed under 64 attempts in a row (a corrupt sequence word, or a
- * writer far faster than this reader); -EBADMSG; -ENOTCONN. */
+ * argument; -EMSGSIZE size smaller than the value; -ENOENT; -EAGAIN no
+ * consistent copy in 20 ms of attempts (a corrupt sequence word, or a
+ * writer that laps every copy; a writer that never pauses only delays the
+ * call); -EBADMSG; -ENOTCONN. */
 CHM_CHECK int chm_svar_get(const char* name, void* buf, size_t size);
 
 /* ------------------------------------------------------------------ sets */
@@ -138,7 +139,8 @@ typedef struct chm_svar_set chm_svar_set_t;
  * name is not declared; -EBUSY an output has a live writer already
  * (chm_err_last names the variable, that writer and this owner);
  * -ENOMEM no memory for the local copies; -EBADMSG a corrupt entry;
- * -ETIMEDOUT; -ENOTCONN. */
+ * -EAGAIN an input gave no consistent copy in 20 ms of attempts (as
+ * chm_svar_get); -ETIMEDOUT; -ENOTCONN. */
 CHM_CHECK int chm_svar_set_create(const char* owner, const char* const* inputs, size_t n_in,
                         const char* const* outputs, size_t n_out, chm_svar_set_t** out);
 

@@ -4,8 +4,10 @@
 // corrupt table in the file.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cstring>
 #include <string>
+#include <thread>
 
 #include "chimera/chimera.h"
 #include "ipc/backplane/backplane.hpp"
@@ -374,6 +376,9 @@ TEST_F(Svar, ACorruptTableIsRefusedNamingTheField) {
     e->bseq[0].store(1);
     e->bseq[1].store(1);
     EXPECT_EQ(chm_svar_get("a", v, sizeof v), -EAGAIN);
+    EXPECT_NE(err().find("changed under every read for 20 ms"), std::string::npos) << err();
+    EXPECT_EQ(chm_svar_set_create("m", a, 1, nullptr, 0, &s), -EAGAIN);
+    EXPECT_NE(err().find("a changed under every read for 20 ms"), std::string::npos) << err();
     e->latest.store(0);
     e->bseq[0].store(2);
     EXPECT_EQ(chm_svar_get("a", v, sizeof v), 0);
@@ -381,3 +386,47 @@ TEST_F(Svar, ACorruptTableIsRefusedNamingTheField) {
 }
 
 }  // namespace
+
+// A set created while its input's writer never pauses: the first copy
+// (what a new set's local starts with) may be lapped many times in a row
+// by a writer faster than the reader's copy; the creation waits for a
+// consistent copy instead of failing.
+TEST_F(Svar, ASetCreatedBesideAWriterThatNeverPausesGetsAConsistentCopy) {
+    constexpr int kElems = 8;  // one cache line: the writer laps most often (64: half the runs caught)
+    ASSERT_EQ(declare("busy", CHM_SVAR_DOUBLE, kElems, 1), 0) << err();
+    chm_svar_set_t* w = nullptr;
+    const char* outs[] = {"busy"};
+    ASSERT_EQ(chm_svar_set_create("writer", nullptr, 0, outs, 1, &w), 0) << err();
+    auto* wv = static_cast<double*>(chm_svar_set_local(w, "busy"));
+    std::atomic<bool> stop{false};
+    std::atomic<std::uint64_t> writes{0};
+    std::thread writer([&] {
+        for (std::uint64_t n = 1; !stop.load(std::memory_order_relaxed); ++n) {
+            for (int k = 0; k < kElems; ++k) wv[k] = double(n);
+            (void)chm_svar_set_write(w);
+            writes.store(n, std::memory_order_relaxed);
+        }
+    });
+    while (writes.load() < 1000) std::this_thread::yield();  // the writer is at full speed
+    int failed = 0, torn = 0, created = 0;
+    std::string first_error;
+    const char* ins[] = {"busy"};
+    for (int i = 0; i < 50000; ++i) {
+        chm_svar_set_t* s = nullptr;
+        const int r = chm_svar_set_create("reader", ins, 1, nullptr, 0, &s);
+        if (r != 0) {
+            if (!failed++) first_error = std::to_string(r) + " " + err();
+            continue;
+        }
+        ++created;
+        const auto* v = static_cast<const double*>(chm_svar_set_local(s, "busy"));
+        for (int k = 1; k < kElems; ++k) torn += v[k] != v[0];
+        EXPECT_EQ(chm_svar_set_destroy(s), 0);
+    }
+    stop = true;
+    writer.join();
+    std::fprintf(stderr, "%d sets created, %d refused, %d torn\n", created, failed, torn);
+    EXPECT_EQ(failed, 0) << first_error;
+    EXPECT_EQ(torn, 0);
+    EXPECT_EQ(chm_svar_set_destroy(w), 0);
+}

@@ -189,8 +189,10 @@ int get_impl(const char* name, void* buf, size_t size) {
     if (i == -ENOENT) return bp::set_error("chm_svar_get: no state variable \"%s\"", name), i;
     if (i < 0) return bp::set_error("chm_svar_get %s: %s", name, why), i;
     if (size < v.bytes) return bp::set_error("chm_svar_get %s: %zu bytes given, the value has %u", name, size, v.bytes), -EMSGSIZE;
-    if (read_value(t.entry(v.index), t.base + v.buf, v.stride, v.bytes, buf))
-        return bp::set_error("chm_svar_get %s: the value changed under %u reads in a row", name, kReadAttempts), -EAGAIN;
+    if (read_value_patient(t.entry(v.index), t.base + v.buf, v.stride, v.bytes, buf))
+        return bp::set_error("chm_svar_get %s: the value changed under every read for %llu ms (a corrupt sequence "
+                             "word, or a writer that laps every copy)", name,
+                             static_cast<unsigned long long>(kPatientReadNs / 1'000'000)), -EAGAIN;
     return 0;
 }
 

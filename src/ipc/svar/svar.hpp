@@ -44,6 +44,11 @@ inline constexpr std::uint32_t kNameLen = 32;  // name and writer name, NUL incl
 inline constexpr std::uint32_t kUnitLen = 16;
 inline constexpr std::uint32_t kElemsMax = 65536;
 inline constexpr unsigned kReadAttempts = 64;
+// How long a call that must return a value (a set's first copy,
+// chm_svar_get) goes on trying when its writer laps every attempt: a
+// writer that never pauses can lap a reader whose copy is slower than two
+// of its writes many times in a row (seen: 1 creation in 500 natively).
+inline constexpr std::uint64_t kPatientReadNs = 20'000'000;
 
 struct TableHeader {
     std::uint32_t magic;        // kTableMagic
@@ -168,6 +173,10 @@ void repair_locked(const Table& t);
 // Copy the current value into `dst`: 0 or -EAGAIN after kReadAttempts.
 int read_value(const Entry* e, const char* buf0, std::uint32_t stride, std::uint32_t bytes, void* dst);
 void write_value(Entry* e, char* buf0, std::uint32_t stride, std::uint32_t bytes, const void* src);
+// read_value again and again until a copy is consistent, for at most
+// kPatientReadNs of real time: 0, or -EAGAIN (a sequence word that never
+// settles is corrupt or belongs to a writer that laps every copy).
+int read_value_patient(const Entry* e, const char* buf0, std::uint32_t stride, std::uint32_t bytes, void* dst);
 
 // Decision cells (decision.cpp). Open a FREE cell for a switch by the
 // process of token `owner`: 0, or -EBUSY when every cell is taken.

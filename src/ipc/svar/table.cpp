@@ -11,6 +11,7 @@
 #include "ipc/svar/svar.hpp"
 #include "kernel/task/holds.hpp"
 #include "lib/hot.hpp"
+#include "port.hpp"
 
 namespace chm::ipc::svar {
 
@@ -225,6 +226,15 @@ CHM_HOT int read_value(const Entry* e, const char* buf0, std::uint32_t stride, s
         std::atomic_thread_fence(Acq);
         if (e->bseq[b].load(R) == want) return 0;
     }
+    return -EAGAIN;
+}
+
+int read_value_patient(const Entry* e, const char* buf0, std::uint32_t stride, std::uint32_t bytes, void* dst) {
+    if (read_value(e, buf0, stride, bytes, dst) == 0) return 0;
+    const std::uint64_t end = port::now_ns() + kPatientReadNs;
+    do {
+        if (read_value(e, buf0, stride, bytes, dst) == 0) return 0;
+    } while (port::now_ns() < end);
     return -EAGAIN;
 }
 
