@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <string>
@@ -45,7 +46,11 @@ void writer(void*) {
     Board* b = board();
     const char* outs[] = {"v"};
     chm_svar_set_t* s = nullptr;
-    if (!b || chm_svar_set_create("writer", nullptr, 0, outs, 1, &s)) return chm_kernel_stop(80);
+    if (!b) return chm_kernel_stop(80);
+    if (const int r = chm_svar_set_create("writer", nullptr, 0, outs, 1, &s)) {
+        std::fprintf(stderr, "writer: chm_svar_set_create: %d %s\n", r, chm_err_last());
+        return chm_kernel_stop(83);
+    }
     auto* v = static_cast<double*>(chm_svar_set_local(s, "v"));
     std::uint64_t n = 0;
     while (!b->stop.load(std::memory_order_relaxed)) {
@@ -63,7 +68,11 @@ void reader(void*) {
     Board* b = board();
     const char* ins[] = {"v"};
     chm_svar_set_t* s = nullptr;
-    if (!b || chm_svar_set_create("reader", ins, 1, nullptr, 0, &s)) return chm_kernel_stop(81);
+    if (!b) return chm_kernel_stop(81);
+    if (const int r = chm_svar_set_create("reader", ins, 1, nullptr, 0, &s)) {
+        std::fprintf(stderr, "reader %d: chm_svar_set_create: %d %s\n", g_reader, r, chm_err_last());
+        return chm_kernel_stop(82);
+    }
     const auto* v = static_cast<const double*>(chm_svar_set_local(s, "v"));
     const std::uint64_t want = reads_wanted();
     std::uint64_t reads = 0, torn = 0, backwards = 0, distinct = 0;
