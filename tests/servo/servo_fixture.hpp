@@ -19,10 +19,16 @@ namespace chm::test {
 constexpr std::uint64_t kMs = 1'000'000;
 constexpr int kLogMax = 16384;
 struct CycleLog {
-    std::uint32_t count;
+    std::uint32_t count;  // published after its entry (modules/counter.c)
     std::uint32_t pad;
     std::uint64_t k[kLogMax];
 };
+// The entries a running module has published so far: read once, and use
+// only that many (a second read may count a cycle appended meanwhile).
+inline std::uint32_t logged(const CycleLog* log) {
+    const std::uint32_t n = __atomic_load_n(&log->count, __ATOMIC_ACQUIRE);
+    return n < kLogMax ? n : kLogMax;
+}
 
 class Servo : public RtpuTest {
 protected:

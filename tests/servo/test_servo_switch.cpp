@@ -59,8 +59,9 @@ private:
 
 // Every cycle index of [from, to) in the log, none twice.
 ::testing::AssertionResult ran_every_cycle(const CycleLog* log, std::uint64_t from, std::uint64_t to) {
-    std::set<std::uint64_t> ks(log->k, log->k + std::min<std::uint32_t>(log->count, kLogMax));
-    if (ks.size() != log->count) return ::testing::AssertionFailure() << "a cycle ran twice";
+    const std::uint32_t n = logged(log);
+    std::set<std::uint64_t> ks(log->k, log->k + n);
+    if (ks.size() != n) return ::testing::AssertionFailure() << "a cycle ran twice";
     for (std::uint64_t k = from; k < to; ++k)
         if (!ks.count(k)) return ::testing::AssertionFailure() << "cycle " << k << " did not run (of " << from << ".." << to << ")";
     return ::testing::AssertionSuccess();
@@ -108,8 +109,8 @@ TEST_F(Servo, ASwitchOneRtpuCannotCommitInTimeSwitchesNothingAnywhere) {
     EXPECT_EQ(status(d1).state, CHM_SERVO_ON);
     EXPECT_EQ(status(a1).state, CHM_SERVO_OFF);
     EXPECT_EQ(status(c3).state, CHM_SERVO_OFF);
-    EXPECT_EQ(log_a1->count, 0u) << "a1 ran cycles of a switch that did not happen";
-    EXPECT_EQ(log_c3->count, 0u) << "c3 ran cycles of a switch that did not happen";
+    EXPECT_EQ(logged(log_a1), 0u) << "a1 ran cycles of a switch that did not happen";
+    EXPECT_EQ(logged(log_c3), 0u) << "c3 ran cycles of a switch that did not happen";
     // c1 and d1 ran every cycle from their start to now, through T.
     const std::uint64_t k0 = started / period;
     const std::uint64_t k_now = chm_time_now() / period;
@@ -128,10 +129,10 @@ TEST_F(Servo, ASwitchOneRtpuCannotCommitInTimeSwitchesNothingAnywhere) {
     nap_ms(20);
     const std::uint64_t kt = at / period;
     EXPECT_TRUE(ran_every_cycle(log_c1, k0, kt));
-    EXPECT_EQ(*std::max_element(log_c1->k, log_c1->k + log_c1->count), kt - 1) << "c1 stopped at T";
-    EXPECT_EQ(*std::max_element(log_d1->k, log_d1->k + log_d1->count), kt - 1) << "d1 stopped at T";
-    EXPECT_EQ(*std::min_element(log_c3->k, log_c3->k + log_c3->count), kt) << "c3 started at T";
-    EXPECT_EQ(*std::min_element(log_a1->k, log_a1->k + log_a1->count), kt) << "a1 started at T";
+    EXPECT_EQ(*std::max_element(log_c1->k, log_c1->k + logged(log_c1)), kt - 1) << "c1 stopped at T";
+    EXPECT_EQ(*std::max_element(log_d1->k, log_d1->k + logged(log_d1)), kt - 1) << "d1 stopped at T";
+    EXPECT_EQ(*std::min_element(log_c3->k, log_c3->k + logged(log_c3)), kt) << "c3 started at T";
+    EXPECT_EQ(*std::min_element(log_a1->k, log_a1->k + logged(log_a1)), kt) << "a1 started at T";
 }
 
 // A controller that dies inside a switch before deciding it (its decision
@@ -211,7 +212,7 @@ TEST_F(Servo, AModuleWhoseSwitchAbortsWhileItsCommitIsArmedEndsOff) {
     // The module goes (or already went) OFF; it ran no cycle.
     for (int ms = 0; ms < 5000 && status(c3).state != CHM_SERVO_OFF; ++ms) nap_ms(1);
     EXPECT_EQ(status(c3).state, CHM_SERVO_OFF) << "a module of an aborted switch stayed on";
-    EXPECT_EQ(log->count, 0u) << "a module of an aborted switch ran cycles";
+    EXPECT_EQ(logged(log), 0u) << "a module of an aborted switch ran cycles";
     // And it can be switched on again, and runs.
     ASSERT_EQ(on_until_done(c3), 0) << chm_servo_last_error();
     const std::uint64_t end = now_ms() + 5000;

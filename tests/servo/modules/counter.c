@@ -43,7 +43,12 @@ static int cycle(chm_module_t* m) {
     state_t* s = chm_module_state(m);
     const uint64_t k = chm_module_release_ns(m) / chm_module_period_ns(m);
     *s->v = (double)k * 1000.0 + chm_module_params(m)[0];
-    if (s->log && s->log->count < LOG_MAX) s->log->k[s->log->count++] = k;
+    if (s->log && s->log->count < LOG_MAX) {
+        /* The entry first, then the count that publishes it: the test
+         * reads the log while this module runs. */
+        s->log->k[s->log->count] = k;
+        __atomic_store_n(&s->log->count, s->log->count + 1, __ATOMIC_RELEASE);
+    }
     return 0;
 }
 
