@@ -237,7 +237,9 @@ TEST_F(RtpuTest, ChimeraOnABackplaneWithoutExpressMail) {
     Outcome r = chimera({"start", "--rtpus", "1"});
     ASSERT_EQ(r.status, 0) << r.err;
     EXPECT_TRUE(contains(r.err, "no express mail")) << r.err;
-    EXPECT_TRUE(contains(read_file(bp_ + ".rtpu1.log"), "no express mail"));
+    // The RTPU writes its warning after it joined, so `start`, which
+    // waits for the join and a ping, may return before the line is in.
+    EXPECT_TRUE(wait_text(bp_ + ".rtpu1.log", "no express mail", 10000)) << read_file(bp_ + ".rtpu1.log");
     r = chimera({"status"});
     EXPECT_EQ(r.status, 0);
     EXPECT_TRUE(contains(r.out, "RTPU 1 (rtpu1")) << r.out;
