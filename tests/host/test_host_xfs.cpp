@@ -417,20 +417,15 @@ TEST_F(HostTest, AStopIsNotHeldByAStuckHostCall) {
     ASSERT_EQ(mkfifo((root_ + "/nobody").c_str(), 0600), 0);
     std::atomic<int> host_result{1};
     std::string host_error;
-    std::thread host_caller;
+    std::jthread host_caller;  // joined on every way out of this test, the failures' too
     if (CHM_UNDER_TSAN) {
-        host_caller = std::thread([&] {
+        host_caller = std::jthread([&] {
             host_result = chm_xfs_open("nobody", CHM_XFS_RDONLY, 0);
             host_error = chm_xfs_last_error();
         });
     } else {
         ASSERT_NO_FATAL_FAILURE(probe({"block", "nobody"}));
     }
-    // Joined on every way out of this test, the failures' too.
-    struct Join {
-        std::thread& t;
-        ~Join() { if (t.joinable()) t.join(); }
-    } join{host_caller};
     // The server's worker waits in open(): seen, not assumed after a nap
     // (under ThreadSanitizer 200 ms were once not enough to get there).
     const std::uint64_t bound = now_ms() + 30000;

@@ -385,8 +385,6 @@ TEST_F(Svar, ACorruptTableIsRefusedNamingTheField) {
     EXPECT_EQ(chm_bp_validate(path_.c_str()), 0) << chm_bp_last_error();
 }
 
-}  // namespace
-
 // A set created while its input's writer never pauses: the first copy
 // (what a new set's local starts with) may be lapped many times in a row
 // by a writer faster than the reader's copy; the creation waits for a
@@ -430,3 +428,5 @@ TEST_F(Svar, ASetCreatedBesideAWriterThatNeverPausesGetsAConsistentCopy) {
     EXPECT_EQ(torn, 0);
     EXPECT_EQ(chm_svar_set_destroy(w), 0);
 }
+
+}  // namespace
