@@ -190,9 +190,7 @@ int get_impl(const char* name, void* buf, size_t size) {
     if (i < 0) return bp::set_error("chm_svar_get %s: %s", name, why), i;
     if (size < v.bytes) return bp::set_error("chm_svar_get %s: %zu bytes given, the value has %u", name, size, v.bytes), -EMSGSIZE;
     if (read_value_patient(t.entry(v.index), t.base + v.buf, v.stride, v.bytes, buf))
-        return bp::set_error("chm_svar_get %s: the value changed under every read for %llu ms (a corrupt sequence "
-                             "word, or a writer that laps every copy)", name,
-                             static_cast<unsigned long long>(kPatientReadNs / 1'000'000)), -EAGAIN;
+        return set_unsettled_error("chm_svar_get", name, "the value"), -EAGAIN;
     return 0;
 }
 

@@ -180,9 +180,7 @@ int resolve(chm_svar_set* s, const char* const* inputs, const char* const* outs)
         std::memset(v.local, 0, v.stride);
         if (read_value_patient(v.e, v.buf0, v.stride, v.bytes, v.local)) {
             r = -EAGAIN;
-            bp::set_error("chm_svar_set_create %s: %s changed under every read for %llu ms (a corrupt sequence "
-                          "word, or a writer that laps every copy)", s->owner, v.name,
-                          static_cast<unsigned long long>(kPatientReadNs / 1'000'000));
+            set_unsettled_error("chm_svar_set_create", s->owner, v.name);
         }
     }
     std::free(views);

@@ -178,6 +178,9 @@ void write_value(Entry* e, char* buf0, std::uint32_t stride, std::uint32_t bytes
 // kPatientReadNs of real time: 0, or -EAGAIN (a sequence word that never
 // settles is corrupt or belongs to a writer that laps every copy).
 int read_value_patient(const Entry* e, const char* buf0, std::uint32_t stride, std::uint32_t bytes, void* dst);
+// The error of a read_value_patient that gave up: "<fn> <owner>: <what>
+// changed under every read for 20 ms (...)".
+void set_unsettled_error(const char* fn, const char* owner, const char* what);
 
 // Decision cells (decision.cpp). Open a FREE cell for a switch by the
 // process of token `owner`: 0, or -EBUSY when every cell is taken.

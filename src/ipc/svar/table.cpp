@@ -238,6 +238,11 @@ int read_value_patient(const Entry* e, const char* buf0, std::uint32_t stride, s
     return -EAGAIN;
 }
 
+void set_unsettled_error(const char* fn, const char* owner, const char* what) {
+    bp::set_error("%s %s: %s changed under every read for %llu ms (a corrupt sequence word, or a writer that laps "
+                  "every copy)", fn, owner, what, static_cast<unsigned long long>(kPatientReadNs / 1'000'000));
+}
+
 CHM_HOT void write_value(Entry* e, char* buf0, std::uint32_t stride, std::uint32_t bytes, const void* src) {
     const std::uint32_t n = e->latest.load(R) + 1;  // the one writer: nobody else moves it
     const std::uint32_t b = n & 1;
