@@ -228,14 +228,51 @@ def spread(r):
     return f"{human(min(f), r['unit'])} to {human(max(f), r['unit'])}"
 
 
+def ratio_bound(target):
+    """b of a 'ratio <= b' target, else None."""
+    t = (target or "").replace(" ", "")
+    if not t.startswith("ratio<="):
+        return None
+    try:
+        return float(t[len("ratio<="):])
+    except ValueError:
+        return None
+
+
+def floor_beyond(r, by_name):
+    """For a ratio target row X that missed: when the run also judges X against
+    an in-run floor (row X_vs_floor, whose peer F is itself measured against X's
+    peer), and F's own ratio to that peer is above X's bound in every round, no
+    design built on that floor can meet X's target on this host. Returns
+    (F, its lowest and highest round ratio), else None."""
+    bound = ratio_bound(r.get("target"))
+    vs = by_name.get(r["name"] + "_vs_floor")
+    fl = by_name.get(vs.get("peer")) if vs else None
+    if bound is None or r.get("target_met") or not fl or fl.get("peer") != r.get("peer"):
+        return None
+    f = [x["ratio"] for x in fl.get("rounds") or [] if x.get("ratio") is not None]
+    if not f and fl.get("ratio") is not None:
+        f = [fl["ratio"]]
+    if not f or min(f) <= bound:
+        return None
+    return fl["name"], min(f), max(f)
+
+
 def summary_markdown(rows, rest):
     """The one-screen summary: every target, its figure and spread, met or not."""
     targets = [r for r in rows if r.get("target")]
     unjudged = [u for u in rest if u.get("target")]
     met = [r for r in targets if r.get("target_met")]
+    by_name = {r["name"]: r for r in rows}
+    beyond = {r["name"]: floor_beyond(r, by_name) for r in targets}
+    beyond = {k: v for k, v in beyond.items() if v}
     n_rounds = max((r.get("rounds_wanted") or 1 for r in targets), default=1)
+    beyond_text = (f" {len(beyond)} of those not met lie{'s' if len(beyond) == 1 else ''} beyond the "
+                   "in-run floor the row is built on (the floor's own ratio to the same peer misses "
+                   "the target in every round); each is judged against its floor in its `_vs_floor` "
+                   "row, which counts as a target of its own." if beyond else "")
     out = ["## Summary", "",
-           f"**{len(met)} of {len(targets) + len(unjudged)} targets met** in this run. "
+           f"**{len(met)} of {len(targets) + len(unjudged)} targets met** in this run.{beyond_text} "
            f"Each target row and its peer were measured in {n_rounds} interleaved "
            f"round{'s' if n_rounds > 1 else ''} of this run; a target counts as met only when "
            "it held in every round. A ratio is the row's figure over its peer's (lower is "
@@ -260,6 +297,11 @@ def summary_markdown(rows, rest):
         elif r.get("target_met") is False:
             verdict = (f"**not met**: held in {held} of {want} rounds" if want > 1
                        else "**not met**")
+            if r["name"] in beyond:
+                fl, lo, hi = beyond[r["name"]]
+                span = f"{lo:.3g}×" if lo == hi else f"{lo:.3g}× to {hi:.3g}×"
+                verdict += (f"; beyond its floor on this host: `{fl}` itself is {span} "
+                            f"`{r['peer']}` (judged against the floor: `{r['name']}_vs_floor`)")
         else:
             verdict = "not judged (no figure to judge it by)"
         out.append(f"| `{r['name']}` | {fig} | {spread(r) or '–'} | "
