@@ -1,15 +1,19 @@
 // A private directory under /dev/shm for one multi-process test (its
-// backplane file, logs, probes): made by SetUp, emptied and removed by
-// TearDown, also when the test failed. Shared by suites ipc and rtpu and
-// by the bench's backplane rows (bench/ipc/rtpu.hpp: BackplaneFile).
+// backplane file, logs, probes): made by SetUp, removed with everything
+// under it by TearDown, also when the test failed. Shared by suites ipc
+// and rtpu, by the bench's backplane rows (bench/ipc/rtpu.hpp:
+// BackplaneFile) and by the host server's fuzz harness (its root).
 #pragma once
 
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <string>
 #include <vector>
 
 #include <dirent.h>
+#include <ftw.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 namespace chm::test {
@@ -31,11 +35,19 @@ inline std::vector<std::string> private_dir_entries(const std::string& dir) {
     return out;
 }
 
-// Remove every file in `dir`, then `dir` (tests make no subdirectories).
+// Remove `dir` and everything under it, depth first. Symbolic links are
+// removed, never followed (FTW_PHYS): a test's link to a file outside
+// the directory leaves that file alone. A directory made unreadable
+// (mode 000: a fuzzed host server may do that) is opened up and emptied.
+inline int remove_tree_entry(const char* path, const struct stat*, int flag, FTW*);
 inline void remove_private_dir(const std::string& dir) {
     if (dir.empty()) return;
-    for (const std::string& name : private_dir_entries(dir)) unlink((dir + "/" + name).c_str());
-    rmdir(dir.c_str());
+    (void)nftw(dir.c_str(), remove_tree_entry, 16, FTW_DEPTH | FTW_PHYS);
+}
+inline int remove_tree_entry(const char* path, const struct stat*, int flag, FTW*) {
+    if (flag == FTW_DNR && chmod(path, 0700) == 0) remove_private_dir(path);
+    std::remove(path);
+    return 0;
 }
 
 }  // namespace chm::test

@@ -19,6 +19,7 @@
 #include <string>
 #include <vector>
 
+#include "../private_dir.hpp"
 #include "host/hostio.hpp"
 #include "host/server/server.hpp"
 
@@ -37,10 +38,15 @@ std::size_t entries(const std::string& dir) {
     return n;
 }
 
+// Whatever the fuzzed requests made under the root goes with it.
+void remove_dir() { chm::test::remove_private_dir(g_dir); }
+
 void setup() {
-    char tmpl[] = "/tmp/chimera-fuzz-host-XXXXXX";
-    if (!mkdtemp(tmpl)) std::abort();
+    const char* tmp = std::getenv("TMPDIR");
+    std::string tmpl = std::string(tmp && *tmp ? tmp : "/tmp") + "/chimera-fuzz-host-XXXXXX";
+    if (!mkdtemp(tmpl.data())) std::abort();
     g_dir = tmpl;
+    std::atexit(remove_dir);
     const std::string root = g_dir + "/root";
     mkdir(root.c_str(), 0700);
     mkdir((root + "/sub").c_str(), 0700);

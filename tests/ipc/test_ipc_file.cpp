@@ -5,6 +5,8 @@
 #include <sstream>
 
 #include <sys/resource.h>
+#include <sys/stat.h>
+#include <unistd.h>
 
 #include "ipc/backplane/layout.hpp"
 #include "ipc_fixture.hpp"
@@ -223,6 +225,29 @@ TEST_F(IpcFile, BpcheckCleanFileAndUnreadableFile) {
     EXPECT_EQ(bpcheck(path_, &out), 0) << out;
     EXPECT_NE(out.find("1 RTPU"), std::string::npos) << out;
     EXPECT_EQ(bpcheck(dir_ + "/missing.bp", &out), 2) << out;
+}
+
+// The helper every multi-process test cleans up with: a test that made a
+// subdirectory (the console's `ls` test does) left its whole private
+// directory behind in /dev/shm, one per run, when it removed files only.
+TEST(PrivateDir, RemovesNestedDirectoriesButNotWhatALinkNames) {
+    const std::string outside = make_private_dir("chm-outside-");
+    const std::string dir = make_private_dir("chm-nested-");
+    ASSERT_FALSE(outside.empty() || dir.empty()) << strerror(errno);
+    std::ofstream(outside + "/keep") << "x";
+    ASSERT_EQ(mkdir((dir + "/sub").c_str(), 0700), 0);
+    ASSERT_EQ(mkdir((dir + "/sub/deeper").c_str(), 0700), 0);
+    std::ofstream(dir + "/sub/deeper/file") << "x";
+    std::ofstream(dir + "/top") << "x";
+    ASSERT_EQ(symlink(outside.c_str(), (dir + "/sub/link").c_str()), 0);
+    ASSERT_EQ(mkdir((dir + "/shut").c_str(), 0700), 0);
+    std::ofstream(dir + "/shut/inside") << "x";
+    ASSERT_EQ(chmod((dir + "/shut").c_str(), 0), 0);  // unreadable (to anyone but root)
+    remove_private_dir(dir);
+    EXPECT_NE(access(dir.c_str(), F_OK), 0) << dir << " is still there";
+    EXPECT_EQ(access((outside + "/keep").c_str(), F_OK), 0) << "a file reached through a link was removed";
+    remove_private_dir(outside);
+    EXPECT_NE(access(outside.c_str(), F_OK), 0);
 }
 
 }  // namespace
