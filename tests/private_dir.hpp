@@ -35,19 +35,25 @@ inline std::vector<std::string> private_dir_entries(const std::string& dir) {
     return out;
 }
 
-// Remove `dir` and everything under it, depth first. Symbolic links are
+// `path` and everything under it, depth first. Symbolic links are
 // removed, never followed (FTW_PHYS): a test's link to a file outside
 // the directory leaves that file alone. A directory made unreadable
 // (mode 000: a fuzzed host server may do that) is opened up and emptied.
 inline int remove_tree_entry(const char* path, const struct stat*, int flag, FTW*);
-inline void remove_private_dir(const std::string& dir) {
-    if (dir.empty()) return;
-    (void)nftw(dir.c_str(), remove_tree_entry, 16, FTW_DEPTH | FTW_PHYS);
-}
+inline void remove_tree(const char* path) { (void)nftw(path, remove_tree_entry, 16, FTW_DEPTH | FTW_PHYS); }
 inline int remove_tree_entry(const char* path, const struct stat*, int flag, FTW*) {
-    if (flag == FTW_DNR && chmod(path, 0700) == 0) remove_private_dir(path);
+    if (flag == FTW_DNR && chmod(path, 0700) == 0) remove_tree(path);
     std::remove(path);
     return 0;
+}
+
+// Remove a directory make_private_dir (or mkdtemp) made, with everything
+// under it. Only a name of that form ("<prefix>-XXXXXX") is touched, so
+// a wrong path (empty, "/", a parent) removes nothing.
+inline void remove_private_dir(const std::string& dir) {
+    const std::size_t slash = dir.find_last_of('/');
+    if (slash == std::string::npos || dir.size() < slash + 8 || dir[dir.size() - 7] != '-') return;
+    remove_tree(dir.c_str());
 }
 
 }  // namespace chm::test

@@ -243,6 +243,10 @@ TEST(PrivateDir, RemovesNestedDirectoriesButNotWhatALinkNames) {
     ASSERT_EQ(mkdir((dir + "/shut").c_str(), 0700), 0);
     std::ofstream(dir + "/shut/inside") << "x";
     ASSERT_EQ(chmod((dir + "/shut").c_str(), 0), 0);  // unreadable (to anyone but root)
+    // Only a name make_private_dir gives is removed: a wrong path is left alone.
+    remove_private_dir(dir + "/sub");
+    remove_private_dir("");
+    EXPECT_EQ(access((dir + "/sub/deeper/file").c_str(), F_OK), 0) << "a path not made by make_private_dir was removed";
     remove_private_dir(dir);
     EXPECT_NE(access(dir.c_str(), F_OK), 0) << dir << " is still there";
     EXPECT_EQ(access((outside + "/keep").c_str(), F_OK), 0) << "a file reached through a link was removed";
