@@ -8,7 +8,6 @@
 // or changed (a canary file beside the root, and its directory's entries).
 // Not fuzzed: kRun (it would run programs the input names) and ioctl
 // requests other than FIONREAD (some change file attributes).
-#include <dirent.h>
 #include <sys/ioctl.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -20,6 +19,7 @@
 #include <vector>
 
 #include "../private_dir.hpp"
+#include "seed_image.hpp"  // chm::fuzz::private_dir: the harnesses' scratch directory
 #include "host/hostio.hpp"
 #include "host/server/server.hpp"
 
@@ -29,23 +29,11 @@ constexpr std::uint32_t kRoom = 1024 - 64;
 std::string g_dir, g_canary;
 struct stat g_canary_st;
 
-std::size_t entries(const std::string& dir) {
-    std::size_t n = 0;
-    if (DIR* d = opendir(dir.c_str())) {
-        while (dirent* e = readdir(d)) n += std::strcmp(e->d_name, ".") && std::strcmp(e->d_name, "..");
-        closedir(d);
-    }
-    return n;
-}
-
 // Whatever the fuzzed requests made under the root goes with it.
 void remove_dir() { chm::test::remove_private_dir(g_dir); }
 
 void setup() {
-    const char* tmp = std::getenv("TMPDIR");
-    std::string tmpl = std::string(tmp && *tmp ? tmp : "/tmp") + "/chimera-fuzz-host-XXXXXX";
-    if (!mkdtemp(tmpl.data())) std::abort();
-    g_dir = tmpl;
+    g_dir = chm::fuzz::private_dir("chimera-fuzz-host-");
     std::atexit(remove_dir);
     const std::string root = g_dir + "/root";
     mkdir(root.c_str(), 0700);
@@ -87,6 +75,6 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (stat(g_canary.c_str(), &st) != 0 || st.st_size != g_canary_st.st_size ||
         st.st_mtim.tv_sec != g_canary_st.st_mtim.tv_sec || st.st_mtim.tv_nsec != g_canary_st.st_mtim.tv_nsec)
         std::abort();  // written through an escape
-    if (entries(g_dir) != 2) std::abort();  // something created beside the root
+    if (chm::test::private_dir_entries(g_dir).size() != 2) std::abort();  // something created beside the root
     return 0;
 }
